@@ -1,0 +1,13 @@
+//! loader: romosplat's on-disk world. Scene folders, images, masks, COLMAP
+//! models, transforms.json, split.json, the DAVIS layout, Middlebury `.flo`,
+//! float EXR, splat PLY, video → frames, and the built-in synthetic scenes.
+//!
+//! Everything here returns [`LoaderError`], whose message names the file.
+
+pub mod camera;
+pub mod error;
+pub mod scene;
+
+pub use camera::{Camera, CameraModel, Intrinsics, Pose};
+pub use error::{LoaderError, Result};
+pub use scene::Frame;
