@@ -59,7 +59,9 @@ impl CameraModel {
 
     /// Model from COLMAP's numeric id.
     pub fn from_id(id: i32) -> Option<Self> {
-        usize::try_from(id).ok().and_then(|i| Self::ALL.get(i).copied())
+        usize::try_from(id)
+            .ok()
+            .and_then(|i| Self::ALL.get(i).copied())
     }
 
     /// COLMAP's model name (as in cameras.txt).
@@ -130,13 +132,21 @@ impl Camera {
     /// Focal lengths (fx, fy) in pixels.
     pub fn focal(&self) -> (f64, f64) {
         let p = &self.params;
-        if self.model.single_focal() { (p[0], p[0]) } else { (p[0], p[1]) }
+        if self.model.single_focal() {
+            (p[0], p[0])
+        } else {
+            (p[0], p[1])
+        }
     }
 
     /// Principal point (cx, cy) in pixels.
     pub fn principal_point(&self) -> (f64, f64) {
         let p = &self.params;
-        if self.model.single_focal() { (p[1], p[2]) } else { (p[2], p[3]) }
+        if self.model.single_focal() {
+            (p[1], p[2])
+        } else {
+            (p[2], p[3])
+        }
     }
 
     /// Distortion parameters (everything after focal and principal point).
@@ -147,18 +157,30 @@ impl Camera {
 
     /// True when every distortion parameter is zero (or the model has none).
     pub fn is_pinhole(&self) -> bool {
-        matches!(self.model, CameraModel::SIMPLE_PINHOLE | CameraModel::PINHOLE)
-            || (matches!(
-                self.model,
-                CameraModel::SIMPLE_RADIAL | CameraModel::RADIAL | CameraModel::OPENCV | CameraModel::FULL_OPENCV
-            ) && self.distortion().iter().all(|d| *d == 0.0))
+        matches!(
+            self.model,
+            CameraModel::SIMPLE_PINHOLE | CameraModel::PINHOLE
+        ) || (matches!(
+            self.model,
+            CameraModel::SIMPLE_RADIAL
+                | CameraModel::RADIAL
+                | CameraModel::OPENCV
+                | CameraModel::FULL_OPENCV
+        ) && self.distortion().iter().all(|d| *d == 0.0))
     }
 
     /// Pinhole intrinsics, ignoring distortion.
     pub fn intrinsics(&self) -> Intrinsics {
         let (fx, fy) = self.focal();
         let (cx, cy) = self.principal_point();
-        Intrinsics { width: self.width as u32, height: self.height as u32, fx, fy, cx, cy }
+        Intrinsics {
+            width: self.width as u32,
+            height: self.height as u32,
+            fx,
+            fy,
+            cx,
+            cy,
+        }
     }
 }
 
@@ -180,7 +202,14 @@ impl Intrinsics {
     pub fn scaled_to(&self, new_w: u32, new_h: u32) -> Intrinsics {
         let sx = new_w as f64 / self.width as f64;
         let sy = new_h as f64 / self.height as f64;
-        Intrinsics { width: new_w, height: new_h, fx: self.fx * sx, fy: self.fy * sy, cx: self.cx * sx, cy: self.cy * sy }
+        Intrinsics {
+            width: new_w,
+            height: new_h,
+            fx: self.fx * sx,
+            fy: self.fy * sy,
+            cx: self.cx * sx,
+            cy: self.cy * sy,
+        }
     }
 
     /// The 3×3 calibration matrix K.
@@ -209,7 +238,10 @@ pub struct Pose {
 
 impl Default for Pose {
     fn default() -> Self {
-        Pose { qvec: [1.0, 0.0, 0.0, 0.0], tvec: [0.0; 3] }
+        Pose {
+            qvec: [1.0, 0.0, 0.0, 0.0],
+            tvec: [0.0; 3],
+        }
     }
 }
 
@@ -240,7 +272,10 @@ impl Pose {
         if qvec[0] < 0.0 {
             qvec.iter_mut().for_each(|v| *v = -*v);
         }
-        Pose { qvec, tvec: [t.x, t.y, t.z] }
+        Pose {
+            qvec,
+            tvec: [t.x, t.y, t.z],
+        }
     }
 
     /// Camera centre in world coordinates, `C = -Rᵀ t`.
@@ -252,7 +287,8 @@ impl Pose {
     pub fn world_to_camera(&self) -> nalgebra::Matrix4<f64> {
         let mut m = nalgebra::Matrix4::identity();
         m.fixed_view_mut::<3, 3>(0, 0).copy_from(&self.rotation());
-        m.fixed_view_mut::<3, 1>(0, 3).copy_from(&self.translation());
+        m.fixed_view_mut::<3, 1>(0, 3)
+            .copy_from(&self.translation());
         m
     }
 
@@ -261,7 +297,8 @@ impl Pose {
         let rt = self.rotation().transpose();
         let mut m = nalgebra::Matrix4::identity();
         m.fixed_view_mut::<3, 3>(0, 0).copy_from(&rt);
-        m.fixed_view_mut::<3, 1>(0, 3).copy_from(&(-(rt * self.translation())));
+        m.fixed_view_mut::<3, 1>(0, 3)
+            .copy_from(&(-(rt * self.translation())));
         m
     }
 
@@ -279,7 +316,11 @@ impl Pose {
     ) -> Self {
         let z = (target - eye).normalize();
         let x = z.cross(&up).normalize();
-        let x = if x.iter().all(|v| v.is_finite()) { x } else { nalgebra::Vector3::x() };
+        let x = if x.iter().all(|v| v.is_finite()) {
+            x
+        } else {
+            nalgebra::Vector3::x()
+        };
         let y = z.cross(&x);
         // Rows of R are the camera axes expressed in world coordinates.
         let r = nalgebra::Matrix3::from_rows(&[x.transpose(), y.transpose(), z.transpose()]);

@@ -40,14 +40,23 @@ pub type Result<T> = std::result::Result<T, LoaderError>;
 impl LoaderError {
     /// Build an I/O error for `path`.
     pub fn io(path: impl AsRef<Path>, source: std::io::Error) -> Self {
-        LoaderError::Io { path: path.as_ref().to_path_buf(), source }
+        LoaderError::Io {
+            path: path.as_ref().to_path_buf(),
+            source,
+        }
     }
     /// Build a format error for `path`.
     pub fn format(path: impl AsRef<Path>, msg: impl Into<String>) -> Self {
-        LoaderError::Format { path: path.as_ref().to_path_buf(), msg: msg.into() }
+        LoaderError::Format {
+            path: path.as_ref().to_path_buf(),
+            msg: msg.into(),
+        }
     }
     /// Build an image error for `path`.
     pub fn image(path: impl AsRef<Path>, source: image::ImageError) -> Self {
-        LoaderError::Image { path: path.as_ref().to_path_buf(), source }
+        LoaderError::Image {
+            path: path.as_ref().to_path_buf(),
+            source,
+        }
     }
 }

@@ -6,6 +6,7 @@
 
 pub mod camera;
 pub mod error;
+pub mod io;
 pub mod scene;
 
 pub use camera::{Camera, CameraModel, Intrinsics, Pose};

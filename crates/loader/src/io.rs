@@ -1,0 +1,230 @@
+//! File I/O helpers every crate uses: atomic writes (temp file in the same
+//! directory, then rename, so a crash never leaves a half-written output) and
+//! image reading/writing with errors that name the file.
+
+use crate::error::{LoaderError, Result};
+use image::{GrayImage, ImageBuffer, Rgb32FImage, RgbImage};
+use std::io::{BufWriter, Write};
+use std::path::{Path, PathBuf};
+use std::sync::atomic::{AtomicU64, Ordering};
+
+static TMP_COUNTER: AtomicU64 = AtomicU64::new(0);
+
+/// A unique temporary path next to `path` (same directory, so `rename` is atomic).
+fn temp_path_for(path: &Path) -> PathBuf {
+    let n = TMP_COUNTER.fetch_add(1, Ordering::Relaxed);
+    let name = path
+        .file_name()
+        .map(|s| s.to_string_lossy().into_owned())
+        .unwrap_or_else(|| "out".into());
+    let tmp = format!(".{name}.tmp.{}.{n}", std::process::id());
+    match path.parent() {
+        Some(p) if !p.as_os_str().is_empty() => p.join(tmp),
+        _ => PathBuf::from(tmp),
+    }
+}
+
+/// Write `path` atomically: `f` writes into a buffered temp file in the same
+/// directory, which is flushed, synced and renamed over `path`. Parent
+/// directories are created. On any error the temp file is removed and `path`
+/// is left untouched.
+///
+/// `f` returns the loader's [`Result`]; plain I/O errors inside it can be
+/// mapped with `LoaderError::io(path, e)`, or use `?` on `std::io::Result`
+/// through [`io_ctx`].
+pub fn write_atomic<F>(path: impl AsRef<Path>, f: F) -> Result<()>
+where
+    F: FnOnce(&mut dyn Write) -> Result<()>,
+{
+    let path = path.as_ref();
+    if let Some(parent) = path.parent()
+        && !parent.as_os_str().is_empty()
+    {
+        std::fs::create_dir_all(parent).map_err(|e| LoaderError::io(parent, e))?;
+    }
+    let tmp = temp_path_for(path);
+    let result = (|| -> Result<()> {
+        let file = std::fs::File::create(&tmp).map_err(|e| LoaderError::io(path, e))?;
+        let mut w = BufWriter::with_capacity(1 << 20, file);
+        f(&mut w)?;
+        let file = w
+            .into_inner()
+            .map_err(|e| LoaderError::io(path, e.into_error()))?;
+        file.sync_all().map_err(|e| LoaderError::io(path, e))?;
+        drop(file);
+        std::fs::rename(&tmp, path).map_err(|e| LoaderError::io(path, e))
+    })();
+    if result.is_err() {
+        let _ = std::fs::remove_file(&tmp);
+    }
+    result
+}
+
+/// Write `bytes` to `path` atomically.
+pub fn write_bytes_atomic(path: impl AsRef<Path>, bytes: &[u8]) -> Result<()> {
+    let path = path.as_ref();
+    write_atomic(path, |w| {
+        w.write_all(bytes).map_err(|e| LoaderError::io(path, e))
+    })
+}
+
+/// Adapter: turn a `std::io::Result` into the loader's result for `path`.
+pub fn io_ctx<T>(path: &Path, r: std::io::Result<T>) -> Result<T> {
+    r.map_err(|e| LoaderError::io(path, e))
+}
+
+/// Read a whole file, naming it on error.
+pub fn read_bytes(path: impl AsRef<Path>) -> Result<Vec<u8>> {
+    let path = path.as_ref();
+    std::fs::read(path).map_err(|e| open_error(path, e))
+}
+
+/// Read a whole text file, naming it on error.
+pub fn read_string(path: impl AsRef<Path>) -> Result<String> {
+    let path = path.as_ref();
+    std::fs::read_to_string(path).map_err(|e| open_error(path, e))
+}
+
+fn open_error(path: &Path, e: std::io::Error) -> LoaderError {
+    if e.kind() == std::io::ErrorKind::NotFound {
+        LoaderError::Missing {
+            path: path.to_path_buf(),
+            context: String::new(),
+        }
+    } else {
+        LoaderError::io(path, e)
+    }
+}
+
+fn open_image(path: &Path) -> Result<image::DynamicImage> {
+    if !path.exists() {
+        return Err(LoaderError::Missing {
+            path: path.to_path_buf(),
+            context: String::new(),
+        });
+    }
+    let reader = image::ImageReader::open(path).map_err(|e| LoaderError::io(path, e))?;
+    let reader = reader
+        .with_guessed_format()
+        .map_err(|e| LoaderError::io(path, e))?;
+    reader.decode().map_err(|e| LoaderError::image(path, e))
+}
+
+/// Read any supported image (PNG, JPEG) as linear-valued RGB f32 in [0, 1]
+/// (values are the stored 8/16-bit code values divided by their maximum; no
+/// sRGB decoding is applied).
+pub fn read_rgb32f(path: impl AsRef<Path>) -> Result<Rgb32FImage> {
+    Ok(open_image(path.as_ref())?.to_rgb32f())
+}
+
+/// Read an image as 8-bit RGB.
+pub fn read_rgb8(path: impl AsRef<Path>) -> Result<RgbImage> {
+    Ok(open_image(path.as_ref())?.to_rgb8())
+}
+
+/// Read an image as 8-bit grayscale (colour images are converted with
+/// Rec. 709 luma weights by the `image` crate).
+pub fn read_gray8(path: impl AsRef<Path>) -> Result<GrayImage> {
+    Ok(open_image(path.as_ref())?.to_luma8())
+}
+
+fn encode_png<P>(
+    path: &Path,
+    img: &ImageBuffer<P, Vec<u8>>,
+    color: image::ExtendedColorType,
+) -> Result<()>
+where
+    P: image::Pixel<Subpixel = u8>,
+{
+    use image::ImageEncoder;
+    write_atomic(path, |w| {
+        image::codecs::png::PngEncoder::new(w)
+            .write_image(img.as_raw(), img.width(), img.height(), color)
+            .map_err(|e| LoaderError::image(path, e))
+    })
+}
+
+/// Write an 8-bit grayscale PNG atomically.
+pub fn write_png_gray8(path: impl AsRef<Path>, img: &GrayImage) -> Result<()> {
+    encode_png(path.as_ref(), img, image::ExtendedColorType::L8)
+}
+
+/// Write an 8-bit RGB PNG atomically.
+pub fn write_png_rgb8(path: impl AsRef<Path>, img: &RgbImage) -> Result<()> {
+    encode_png(path.as_ref(), img, image::ExtendedColorType::Rgb8)
+}
+
+/// Convert an f32 RGB image in [0, 1] to 8-bit (clamped, rounded).
+pub fn rgb32f_to_rgb8(img: &Rgb32FImage) -> RgbImage {
+    let data = img
+        .as_raw()
+        .iter()
+        .map(|v| (v.clamp(0.0, 1.0) * 255.0).round() as u8)
+        .collect();
+    RgbImage::from_raw(img.width(), img.height(), data)
+        .unwrap_or_else(|| RgbImage::new(img.width(), img.height()))
+}
+
+/// Write an f32 RGB image in [0, 1] as an 8-bit PNG atomically.
+pub fn write_png_rgb32f(path: impl AsRef<Path>, img: &Rgb32FImage) -> Result<()> {
+    write_png_rgb8(path, &rgb32f_to_rgb8(img))
+}
+
+#[cfg(test)]
+mod tests {
+    #![allow(clippy::unwrap_used, clippy::expect_used)]
+    use super::*;
+
+    #[test]
+    fn atomic_write_replaces_and_leaves_no_temp() {
+        let dir = tempfile::tempdir().unwrap();
+        let p = dir.path().join("sub/a.txt");
+        write_bytes_atomic(&p, b"one").unwrap();
+        write_bytes_atomic(&p, b"two").unwrap();
+        assert_eq!(std::fs::read(&p).unwrap(), b"two");
+        let entries: Vec<_> = std::fs::read_dir(dir.path().join("sub")).unwrap().collect();
+        assert_eq!(entries.len(), 1);
+    }
+
+    #[test]
+    fn failed_write_keeps_old_content() {
+        let dir = tempfile::tempdir().unwrap();
+        let p = dir.path().join("a.txt");
+        write_bytes_atomic(&p, b"old").unwrap();
+        let r = write_atomic(&p, |w| {
+            w.write_all(b"partial").unwrap();
+            Err(LoaderError::format(&p, "boom"))
+        });
+        assert!(r.is_err());
+        assert_eq!(std::fs::read(&p).unwrap(), b"old");
+        assert_eq!(std::fs::read_dir(dir.path()).unwrap().count(), 1);
+    }
+
+    #[test]
+    fn png_round_trip_gray_and_rgb() {
+        let dir = tempfile::tempdir().unwrap();
+        let g = GrayImage::from_fn(7, 5, |x, y| image::Luma([(x * 30 + y) as u8]));
+        let pg = dir.path().join("g.png");
+        write_png_gray8(&pg, &g).unwrap();
+        assert_eq!(read_gray8(&pg).unwrap(), g);
+        let c = RgbImage::from_fn(4, 3, |x, y| image::Rgb([x as u8 * 60, y as u8 * 80, 255]));
+        let pc = dir.path().join("c.png");
+        write_png_rgb8(&pc, &c).unwrap();
+        assert_eq!(read_rgb8(&pc).unwrap(), c);
+        let f = read_rgb32f(&pc).unwrap();
+        assert!((f.get_pixel(1, 2).0[0] - 60.0 / 255.0).abs() < 1e-6);
+        assert_eq!(rgb32f_to_rgb8(&f), c);
+    }
+
+    #[test]
+    fn missing_and_corrupt_images_name_the_file() {
+        let dir = tempfile::tempdir().unwrap();
+        let p = dir.path().join("nothere.png");
+        let e = read_rgb32f(&p).unwrap_err().to_string();
+        assert!(e.contains("nothere.png") && e.contains("not found"), "{e}");
+        let bad = dir.path().join("bad.png");
+        std::fs::write(&bad, b"\x89PNG\r\n\x1a\ngarbage").unwrap();
+        let e = read_gray8(&bad).unwrap_err().to_string();
+        assert!(e.contains("bad.png"), "{e}");
+    }
+}
