@@ -1,0 +1,32 @@
+//! One module per subcommand of the CLI contract in DESIGN.md.
+
+use crate::Ctx;
+use clap::Subcommand;
+
+/// Every subcommand.
+#[derive(Debug, Subcommand)]
+pub enum Command {
+    /// Evaluate masks, poses or rendered views.
+    #[command(subcommand)]
+    Eval(EvalCommand),
+    /// Benchmarks printing JSON.
+    #[command(subcommand)]
+    Bench(BenchCommand),
+}
+
+/// `romosplat eval ...`
+#[derive(Debug, Subcommand)]
+pub enum EvalCommand {}
+
+/// `romosplat bench ...`
+#[derive(Debug, Subcommand)]
+pub enum BenchCommand {}
+
+/// Run one command and return its JSON summary.
+pub fn dispatch(cmd: &Command, ctx: &Ctx) -> anyhow::Result<serde_json::Value> {
+    let _ = ctx;
+    match cmd {
+        Command::Eval(e) => match *e {},
+        Command::Bench(b) => match *b {},
+    }
+}
