@@ -3,6 +3,7 @@
 
 mod cmd;
 mod ctx;
+mod report;
 
 use clap::Parser;
 pub use ctx::Ctx;
