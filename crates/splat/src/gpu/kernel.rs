@@ -1,0 +1,329 @@
+//! Shared plumbing for every compute kernel: the binding table each host
+//! module declares, the pipeline built once from it, binding buffers *by name*
+//! (never by position), and a command recorder that can time every dispatch
+//! with timestamp queries (used by `gpu::profile_step`).
+//!
+//! The binding table is the single truth on the Rust side; the explicit bind
+//! group layout is built from it, wgpu validates the WGSL against that layout
+//! when the pipeline is created, and `tests/reflection` checks the table
+//! against naga's reflection of every shader (names, read-only, uniform sizes).
+
+use super::{GpuContext, GpuError};
+
+/// What a binding is.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub enum BindingKind {
+    /// `var<uniform>` of the kernel's uniform struct.
+    Uniform,
+    /// `var<storage, read>`.
+    StorageRead,
+    /// `var<storage, read_write>`.
+    StorageRw,
+}
+
+/// One `@group(0) @binding(n) var name` of a kernel.
+#[derive(Debug, Clone, Copy)]
+pub struct BindingDecl {
+    pub name: &'static str,
+    pub binding: u32,
+    pub kind: BindingKind,
+}
+
+/// Everything the host knows about one WGSL file.
+#[derive(Debug, Clone, Copy)]
+pub struct KernelDecl {
+    /// File stem in `shaders/splat/` and the host module name.
+    pub name: &'static str,
+    /// The WGSL text of the kernel (without `common.wgsl`).
+    pub source: &'static str,
+    /// Compute entry points.
+    pub entry_points: &'static [&'static str],
+    /// Every binding in group 0.
+    pub bindings: &'static [BindingDecl],
+    /// Name and byte size of the uniform struct, when there is one.
+    pub uniform: Option<(&'static str, usize)>,
+    /// True when the kernel uses gradient atomics (`grad_add`), so it is
+    /// compiled in a float-atomic and a CAS variant.
+    pub uses_grad_atomics: bool,
+}
+
+/// Shared helpers (structs, tile rectangles, projection math) prepended to every kernel.
+pub const COMMON_WGSL: &str = include_str!("../../../../shaders/splat/common.wgsl");
+/// Gradient accumulation with native float atomics.
+pub const ATOMIC_FLOAT_WGSL: &str = "alias GradAtomic = atomic<f32>;\n\
+fn atomic_add_f32(p: ptr<storage, atomic<f32>, read_write>, v: f32) { atomicAdd(p, v); }\n";
+/// Gradient accumulation with a compare-and-swap loop on `atomic<u32>` (GL fallback).
+pub const ATOMIC_CAS_WGSL: &str = "alias GradAtomic = atomic<u32>;\n\
+fn atomic_add_f32(p: ptr<storage, atomic<u32>, read_write>, v: f32) {\n\
+    var old = atomicLoad(p);\n\
+    loop {\n\
+        let r = atomicCompareExchangeWeak(p, old, bitcast<u32>(bitcast<f32>(old) + v));\n\
+        if r.exchanged { break; }\n\
+        old = r.old_value;\n\
+    }\n\
+}\n";
+
+/// The full WGSL module text for a kernel and atomics variant.
+pub fn shader_source(decl: &KernelDecl, float_atomics: bool) -> String {
+    let mut s = String::with_capacity(COMMON_WGSL.len() + decl.source.len() + 512);
+    s.push_str(COMMON_WGSL);
+    s.push('\n');
+    if decl.uses_grad_atomics {
+        s.push_str(if float_atomics {
+            ATOMIC_FLOAT_WGSL
+        } else {
+            ATOMIC_CAS_WGSL
+        });
+        s.push('\n');
+    }
+    s.push_str(decl.source);
+    s
+}
+
+/// A compiled kernel: one pipeline per entry point, one bind group layout.
+pub struct Kernel {
+    pub decl: &'static KernelDecl,
+    layout: wgpu::BindGroupLayout,
+    pipelines: Vec<(&'static str, wgpu::ComputePipeline)>,
+}
+
+impl Kernel {
+    /// Build the pipelines (pays the shader compile once).
+    pub fn new(ctx: &GpuContext, decl: &'static KernelDecl) -> Self {
+        let entries: Vec<wgpu::BindGroupLayoutEntry> = decl
+            .bindings
+            .iter()
+            .map(|b| wgpu::BindGroupLayoutEntry {
+                binding: b.binding,
+                visibility: wgpu::ShaderStages::COMPUTE,
+                ty: wgpu::BindingType::Buffer {
+                    ty: match b.kind {
+                        BindingKind::Uniform => wgpu::BufferBindingType::Uniform,
+                        BindingKind::StorageRead => {
+                            wgpu::BufferBindingType::Storage { read_only: true }
+                        }
+                        BindingKind::StorageRw => {
+                            wgpu::BufferBindingType::Storage { read_only: false }
+                        }
+                    },
+                    has_dynamic_offset: false,
+                    min_binding_size: None,
+                },
+                count: None,
+            })
+            .collect();
+        let layout = ctx
+            .device
+            .create_bind_group_layout(&wgpu::BindGroupLayoutDescriptor {
+                label: Some(decl.name),
+                entries: &entries,
+            });
+        let pl = ctx
+            .device
+            .create_pipeline_layout(&wgpu::PipelineLayoutDescriptor {
+                label: Some(decl.name),
+                bind_group_layouts: &[Some(&layout)],
+                immediate_size: 0,
+            });
+        let module = ctx
+            .device
+            .create_shader_module(wgpu::ShaderModuleDescriptor {
+                label: Some(decl.name),
+                source: wgpu::ShaderSource::Wgsl(shader_source(decl, ctx.float_atomics).into()),
+            });
+        let pipelines = decl
+            .entry_points
+            .iter()
+            .map(|ep| {
+                let p = ctx
+                    .device
+                    .create_compute_pipeline(&wgpu::ComputePipelineDescriptor {
+                        label: Some(ep),
+                        layout: Some(&pl),
+                        module: &module,
+                        entry_point: Some(ep),
+                        compilation_options: Default::default(),
+                        cache: None,
+                    });
+                (*ep, p)
+            })
+            .collect();
+        Kernel {
+            decl,
+            layout,
+            pipelines,
+        }
+    }
+
+    /// A bind group from `(name, buffer)` pairs; every declared binding must be
+    /// given exactly once and no unknown name may appear.
+    pub fn bind(
+        &self,
+        ctx: &GpuContext,
+        buffers: &[(&str, &wgpu::Buffer)],
+    ) -> Result<wgpu::BindGroup, GpuError> {
+        for (name, _) in buffers {
+            if !self.decl.bindings.iter().any(|b| b.name == *name) {
+                return Err(GpuError::Binding(format!(
+                    "{}: no binding named {name}",
+                    self.decl.name
+                )));
+            }
+        }
+        let mut entries = Vec::with_capacity(self.decl.bindings.len());
+        for b in self.decl.bindings {
+            let mut found = buffers.iter().filter(|(n, _)| *n == b.name);
+            let buf = found.next().ok_or_else(|| {
+                GpuError::Binding(format!("{}: binding {} not given", self.decl.name, b.name))
+            })?;
+            if found.next().is_some() {
+                return Err(GpuError::Binding(format!(
+                    "{}: binding {} given twice",
+                    self.decl.name, b.name
+                )));
+            }
+            entries.push(wgpu::BindGroupEntry {
+                binding: b.binding,
+                resource: buf.1.as_entire_binding(),
+            });
+        }
+        Ok(ctx.device.create_bind_group(&wgpu::BindGroupDescriptor {
+            label: Some(self.decl.name),
+            layout: &self.layout,
+            entries: &entries,
+        }))
+    }
+
+    fn pipeline(&self, entry: &str) -> Result<&wgpu::ComputePipeline, GpuError> {
+        self.pipelines
+            .iter()
+            .find(|(n, _)| *n == entry)
+            .map(|(_, p)| p)
+            .ok_or_else(|| GpuError::Binding(format!("{}: no entry point {entry}", self.decl.name)))
+    }
+}
+
+/// Workgroup counts for `n` items at `wg` per group, spread over y when x
+/// would exceed the 65 535 limit. Shaders recover the linear index with
+/// `linear_index` from `common.wgsl`.
+pub fn groups_1d(n: u32, wg: u32) -> [u32; 3] {
+    let groups = n.div_ceil(wg).max(1);
+    if groups <= 65_535 {
+        [groups, 1, 1]
+    } else {
+        [65_535, groups.div_ceil(65_535), 1]
+    }
+}
+
+/// Records dispatches into one command encoder; optionally timestamps each.
+pub struct Recorder<'a> {
+    ctx: &'a GpuContext,
+    pub encoder: wgpu::CommandEncoder,
+    timer: Option<Timer>,
+}
+
+struct Timer {
+    set: wgpu::QuerySet,
+    capacity: u32,
+    labels: Vec<&'static str>,
+}
+
+impl<'a> Recorder<'a> {
+    /// A recorder; with `profile` (and a device with timestamp queries) each
+    /// dispatch gets a begin/end timestamp pair, up to `2048` dispatches.
+    pub fn new(ctx: &'a GpuContext, profile: bool) -> Self {
+        let encoder = ctx
+            .device
+            .create_command_encoder(&wgpu::CommandEncoderDescriptor {
+                label: Some("splat"),
+            });
+        let timer = (profile && ctx.timestamps).then(|| {
+            let capacity = 4096;
+            Timer {
+                set: ctx.device.create_query_set(&wgpu::QuerySetDescriptor {
+                    label: Some("timestamps"),
+                    ty: wgpu::QueryType::Timestamp,
+                    count: capacity,
+                }),
+                capacity,
+                labels: Vec::new(),
+            }
+        });
+        Recorder {
+            ctx,
+            encoder,
+            timer,
+        }
+    }
+
+    /// One compute pass running `entry` of `kernel`.
+    pub fn dispatch(
+        &mut self,
+        kernel: &Kernel,
+        entry: &'static str,
+        bind: &wgpu::BindGroup,
+        groups: [u32; 3],
+    ) -> Result<(), GpuError> {
+        let pipeline = kernel.pipeline(entry)?;
+        let ts = match &mut self.timer {
+            Some(t) if (t.labels.len() as u32 + 1) * 2 <= t.capacity => {
+                let i = t.labels.len() as u32 * 2;
+                t.labels.push(entry);
+                Some(wgpu::ComputePassTimestampWrites {
+                    query_set: &t.set,
+                    beginning_of_pass_write_index: Some(i),
+                    end_of_pass_write_index: Some(i + 1),
+                })
+            }
+            _ => None,
+        };
+        let mut pass = self
+            .encoder
+            .begin_compute_pass(&wgpu::ComputePassDescriptor {
+                label: Some(entry),
+                timestamp_writes: ts,
+            });
+        pass.set_pipeline(pipeline);
+        pass.set_bind_group(0, bind, &[]);
+        pass.dispatch_workgroups(groups[0], groups[1], groups[2]);
+        Ok(())
+    }
+
+    /// Submit everything recorded and wait. Returns per-dispatch
+    /// `(entry point, milliseconds)` when timing was on.
+    pub fn finish(self) -> Result<Vec<(&'static str, f64)>, GpuError> {
+        let Recorder {
+            ctx,
+            mut encoder,
+            timer,
+        } = self;
+        let resolve = timer.as_ref().filter(|t| !t.labels.is_empty()).map(|t| {
+            let n = t.labels.len() as u32 * 2;
+            let buf = ctx.device.create_buffer(&wgpu::BufferDescriptor {
+                label: Some("timestamps"),
+                size: n as u64 * 8,
+                usage: wgpu::BufferUsages::QUERY_RESOLVE | wgpu::BufferUsages::COPY_SRC,
+                mapped_at_creation: false,
+            });
+            encoder.resolve_query_set(&t.set, 0..n, &buf, 0);
+            buf
+        });
+        ctx.queue.submit([encoder.finish()]);
+        ctx.wait()?;
+        let (Some(t), Some(buf)) = (timer, resolve) else {
+            return Ok(Vec::new());
+        };
+        let stamps: Vec<u64> = ctx.read(&buf, t.labels.len() * 2)?;
+        let period = ctx.queue.get_timestamp_period() as f64;
+        Ok(t.labels
+            .iter()
+            .enumerate()
+            .map(|(i, l)| {
+                (
+                    *l,
+                    stamps[2 * i + 1].saturating_sub(stamps[2 * i]) as f64 * period * 1e-6,
+                )
+            })
+            .collect())
+    }
+}

@@ -1,0 +1,122 @@
+//! Host for `shaders/splat/prefix_sum.wgsl`: exclusive scan of `u32` on the
+//! GPU (block scan in workgroup memory + recursive scan of block totals), used
+//! for per-splat tile counts → key offsets and for radix-sort digit offsets.
+//! Reference: Blelloch, "Prefix sums and their applications" (1990); the
+//! per-block scan is Hillis–Steele.
+
+use super::kernel::{BindingDecl, BindingKind, Kernel, KernelDecl, Recorder, groups_1d};
+use super::{GpuContext, GpuError};
+use bytemuck::{Pod, Zeroable};
+
+/// Invocations per workgroup (= elements per block).
+pub const WORKGROUP_SIZE: u32 = 256;
+
+/// Uniforms of the scan (16 bytes).
+#[repr(C)]
+#[derive(Debug, Clone, Copy, Pod, Zeroable)]
+pub struct ScanUniforms {
+    pub n: u32,
+    pub pad: [u32; 3],
+}
+
+pub static DECL: KernelDecl = KernelDecl {
+    name: "prefix_sum",
+    source: include_str!("../../../../shaders/splat/prefix_sum.wgsl"),
+    entry_points: &["scan_blocks", "add_block_offsets", "write_total"],
+    bindings: &[
+        BindingDecl {
+            name: "u",
+            binding: 0,
+            kind: BindingKind::Uniform,
+        },
+        BindingDecl {
+            name: "input",
+            binding: 1,
+            kind: BindingKind::StorageRead,
+        },
+        BindingDecl {
+            name: "output",
+            binding: 2,
+            kind: BindingKind::StorageRw,
+        },
+        BindingDecl {
+            name: "block_sums",
+            binding: 3,
+            kind: BindingKind::StorageRw,
+        },
+    ],
+    uniform: Some(("ScanUniforms", std::mem::size_of::<ScanUniforms>())),
+    uses_grad_atomics: false,
+};
+
+/// Arguments of one scan.
+pub struct ScanArgs<'a> {
+    /// `n` input values.
+    pub input: &'a wgpu::Buffer,
+    /// At least `n + 1` values: exclusive scan in `[0, n)`, total at `[n]`.
+    pub output: &'a wgpu::Buffer,
+    /// Number of elements.
+    pub n: u32,
+}
+
+/// The compiled scan kernel.
+pub struct PrefixSum {
+    kernel: Kernel,
+}
+
+impl PrefixSum {
+    pub fn new(ctx: &GpuContext) -> Self {
+        PrefixSum {
+            kernel: Kernel::new(ctx, &DECL),
+        }
+    }
+
+    /// Record an exclusive scan of `args.input[..n]` into `args.output`.
+    pub fn dispatch(
+        &self,
+        ctx: &GpuContext,
+        rec: &mut Recorder,
+        args: &ScanArgs,
+    ) -> Result<(), GpuError> {
+        let n = args.n;
+        let blocks = n.div_ceil(WORKGROUP_SIZE).max(1);
+        let sums = ctx.storage("scan_block_sums", (blocks as u64 + 1) * 4);
+        let u = ctx.uniform("scan_u", &ScanUniforms { n, pad: [0; 3] });
+        let bind = self.kernel.bind(
+            ctx,
+            &[
+                ("u", &u),
+                ("input", args.input),
+                ("output", args.output),
+                ("block_sums", &sums),
+            ],
+        )?;
+        let groups = groups_1d(n, WORKGROUP_SIZE);
+        if n > 0 {
+            rec.dispatch(&self.kernel, "scan_blocks", &bind, groups)?;
+        }
+        if blocks > 1 {
+            let scanned = ctx.storage("scan_block_offsets", (blocks as u64 + 1) * 4);
+            self.dispatch(
+                ctx,
+                rec,
+                &ScanArgs {
+                    input: &sums,
+                    output: &scanned,
+                    n: blocks,
+                },
+            )?;
+            let bind2 = self.kernel.bind(
+                ctx,
+                &[
+                    ("u", &u),
+                    ("input", args.input),
+                    ("output", args.output),
+                    ("block_sums", &scanned),
+                ],
+            )?;
+            rec.dispatch(&self.kernel, "add_block_offsets", &bind2, groups)?;
+        }
+        rec.dispatch(&self.kernel, "write_total", &bind, [1, 1, 1])
+    }
+}

@@ -1,0 +1,44 @@
+//! GPU tests. They skip (with a message) only when no adapter exists and the
+//! `CI` environment variable is unset; under CI a missing adapter fails.
+#![allow(clippy::unwrap_used, clippy::expect_used)]
+
+mod binning;
+mod reflection;
+
+use super::{GpuContext, GpuError, GpuOptions};
+use std::sync::OnceLock;
+
+fn open(opts: &GpuOptions) -> Option<GpuContext> {
+    match GpuContext::new(opts) {
+        Ok(c) => Some(c),
+        Err(GpuError::NoAdapter) if std::env::var_os("CI").is_none() => {
+            eprintln!("skipping GPU test: no adapter (set CI to make this fail)");
+            None
+        }
+        Err(e) => panic!("GPU context: {e}"),
+    }
+}
+
+/// Shared context using float atomics when the adapter has them.
+pub(crate) fn ctx() -> Option<&'static GpuContext> {
+    static C: OnceLock<Option<GpuContext>> = OnceLock::new();
+    C.get_or_init(|| {
+        open(&GpuOptions {
+            force_cas_atomics: false,
+            timestamps: true,
+        })
+    })
+    .as_ref()
+}
+
+/// Shared context forced onto the compare-and-swap atomics path.
+pub(crate) fn ctx_cas() -> Option<&'static GpuContext> {
+    static C: OnceLock<Option<GpuContext>> = OnceLock::new();
+    C.get_or_init(|| {
+        open(&GpuOptions {
+            force_cas_atomics: true,
+            timestamps: false,
+        })
+    })
+    .as_ref()
+}
