@@ -3,6 +3,7 @@
 
 mod cmd;
 mod ctx;
+mod pipeline;
 mod report;
 
 use clap::Parser;
