@@ -5,6 +5,7 @@
 //! Everything here returns [`LoaderError`], whose message names the file.
 
 pub mod camera;
+pub mod colmap;
 pub mod error;
 pub mod io;
 pub mod scene;

@@ -1,0 +1,361 @@
+//! COLMAP sparse models (`cameras`, `images`, `points3D`), binary and text,
+//! read and write, following COLMAP's `src/colmap/scene/reconstruction_io.cc`
+//! layout (little-endian; ids u32/u64; invalid point3D id = u64::MAX / `-1`).
+//!
+//! The binary writer is byte-exact: reading a file and writing it back gives
+//! the same bytes, including the record order of models written by COLMAP
+//! itself (kept in [`FileOrder`]). The extra files COLMAP 4 / pycolmap write
+//! next to a model (`rigs.bin`, `frames.bin`, `project.ini`, ...) are ignored.
+
+mod binary;
+mod text;
+
+pub use binary::{read_model_binary, write_model_binary};
+pub use text::{read_model_text, write_model_text};
+
+use crate::camera::{Camera, Pose};
+use crate::error::{LoaderError, Result};
+use serde::{Deserialize, Serialize};
+use std::collections::BTreeMap;
+use std::path::{Path, PathBuf};
+
+/// One 2D keypoint of an image, optionally observing a 3D point.
+#[derive(Debug, Clone, Copy, PartialEq, Serialize, Deserialize)]
+pub struct Point2D {
+    /// Pixel coordinates (COLMAP: pixel centre of the top-left pixel is (0.5, 0.5)).
+    pub xy: [f64; 2],
+    /// The 3D point this keypoint observes, if triangulated.
+    pub point3d_id: Option<u64>,
+}
+
+/// A registered image: its pose, camera and keypoints.
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+pub struct ColmapImage {
+    /// COLMAP image id.
+    pub id: u32,
+    /// World-to-camera pose (qvec w,x,y,z + tvec), stored exactly as read.
+    pub pose: Pose,
+    /// Id of the camera (intrinsics) in [`ColmapModel::cameras`].
+    pub camera_id: u32,
+    /// Image file name relative to the image folder.
+    pub name: String,
+    /// Keypoints, in file order (their index is the `point2d_idx` of tracks).
+    pub points2d: Vec<Point2D>,
+}
+
+impl ColmapImage {
+    /// An image with no keypoints.
+    pub fn new(id: u32, pose: Pose, camera_id: u32, name: impl Into<String>) -> Self {
+        ColmapImage {
+            id,
+            pose,
+            camera_id,
+            name: name.into(),
+            points2d: Vec::new(),
+        }
+    }
+}
+
+/// A triangulated 3D point with its colour, reprojection error and track.
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+pub struct Point3D {
+    /// COLMAP point3D id.
+    pub id: u64,
+    /// World position.
+    pub xyz: [f64; 3],
+    /// Colour, 8-bit RGB.
+    pub rgb: [u8; 3],
+    /// Mean reprojection error in pixels (COLMAP writes -1 when unknown).
+    pub error: f64,
+    /// Observations as (image id, index into that image's `points2d`).
+    pub track: Vec<(u32, u32)>,
+}
+
+/// The order records appeared in the files a model was read from, so writing
+/// it back reproduces COLMAP's (hash-map) order byte for byte. Writers use it
+/// only when it lists exactly the model's ids; otherwise they write in
+/// ascending id order. Leave it `Default` when building a model by hand.
+#[derive(Debug, Clone, Default, PartialEq, Serialize, Deserialize)]
+pub struct FileOrder {
+    pub cameras: Vec<u32>,
+    pub images: Vec<u32>,
+    pub points3d: Vec<u64>,
+}
+
+/// A COLMAP sparse model. Build one with `ColmapModel::default()` and insert
+/// into the maps (ids as keys; each value's `id` must equal its key).
+#[derive(Debug, Clone, Default, PartialEq, Serialize, Deserialize)]
+pub struct ColmapModel {
+    pub cameras: BTreeMap<u32, Camera>,
+    pub images: BTreeMap<u32, ColmapImage>,
+    pub points3d: BTreeMap<u64, Point3D>,
+    /// Record order of the files this was read from (see [`FileOrder`]).
+    #[serde(default)]
+    pub file_order: FileOrder,
+}
+
+/// Which on-disk form a model folder holds.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Serialize, Deserialize)]
+pub enum ModelFormat {
+    Binary,
+    Text,
+}
+
+impl ColmapModel {
+    /// Images in ascending name order (capture order for our scenes).
+    pub fn images_by_name(&self) -> Vec<&ColmapImage> {
+        let mut v: Vec<&ColmapImage> = self.images.values().collect();
+        v.sort_by(|a, b| a.name.cmp(&b.name));
+        v
+    }
+
+    /// The image with this file name, if registered.
+    pub fn image_by_name(&self, name: &str) -> Option<&ColmapImage> {
+        self.images.values().find(|im| im.name == name)
+    }
+
+    /// Check internal consistency: map keys equal ids, every image's camera
+    /// exists, camera parameter counts match their models. `path` names the
+    /// model in the error.
+    pub fn validate(&self, path: &Path) -> Result<()> {
+        for (k, c) in &self.cameras {
+            if *k != c.id {
+                return Err(LoaderError::format(
+                    path,
+                    format!("camera key {k} != camera id {}", c.id),
+                ));
+            }
+            if c.params.len() != c.model.num_params() {
+                return Err(LoaderError::format(
+                    path,
+                    format!(
+                        "camera {k}: model {} needs {} params, has {}",
+                        c.model.name(),
+                        c.model.num_params(),
+                        c.params.len()
+                    ),
+                ));
+            }
+        }
+        for (k, im) in &self.images {
+            if *k != im.id {
+                return Err(LoaderError::format(
+                    path,
+                    format!("image key {k} != image id {}", im.id),
+                ));
+            }
+            if !self.cameras.contains_key(&im.camera_id) {
+                return Err(LoaderError::format(
+                    path,
+                    format!(
+                        "image {} ({}) refers to missing camera {}",
+                        im.id, im.name, im.camera_id
+                    ),
+                ));
+            }
+        }
+        for (k, p) in &self.points3d {
+            if *k != p.id {
+                return Err(LoaderError::format(
+                    path,
+                    format!("point3D key {k} != point id {}", p.id),
+                ));
+            }
+        }
+        Ok(())
+    }
+
+    pub(crate) fn camera_order(&self) -> Vec<u32> {
+        ordered(&self.file_order.cameras, &self.cameras)
+    }
+    pub(crate) fn image_order(&self) -> Vec<u32> {
+        ordered(&self.file_order.images, &self.images)
+    }
+    pub(crate) fn point_order(&self) -> Vec<u64> {
+        ordered(&self.file_order.points3d, &self.points3d)
+    }
+}
+
+/// `order` if it lists exactly the keys of `map` (each once), else sorted keys.
+fn ordered<K: Ord + Copy, V>(order: &[K], map: &BTreeMap<K, V>) -> Vec<K> {
+    if order.len() == map.len() && order.iter().all(|k| map.contains_key(k)) {
+        let mut seen: Vec<K> = order.to_vec();
+        seen.sort();
+        seen.dedup();
+        if seen.len() == order.len() {
+            return order.to_vec();
+        }
+    }
+    map.keys().copied().collect()
+}
+
+/// Which form `dir` holds: binary when `cameras.bin` exists, text when
+/// `cameras.txt` exists (binary preferred when both do).
+pub fn detect_format(dir: &Path) -> Option<ModelFormat> {
+    if dir.join("cameras.bin").is_file() {
+        Some(ModelFormat::Binary)
+    } else if dir.join("cameras.txt").is_file() {
+        Some(ModelFormat::Text)
+    } else {
+        None
+    }
+}
+
+/// Find the model folder for `path`: `path` itself when it holds
+/// `cameras.{bin,txt}`, else `path/sparse/0`, else `path/sparse`.
+pub fn find_model_dir(path: &Path) -> Option<PathBuf> {
+    [
+        path.to_path_buf(),
+        path.join("sparse/0"),
+        path.join("sparse"),
+    ]
+    .into_iter()
+    .find(|p| detect_format(p).is_some())
+}
+
+/// Read the model in `dir`, binary or text (binary preferred).
+pub fn read_model(dir: impl AsRef<Path>) -> Result<ColmapModel> {
+    let dir = dir.as_ref();
+    match detect_format(dir) {
+        Some(ModelFormat::Binary) => read_model_binary(dir),
+        Some(ModelFormat::Text) => read_model_text(dir),
+        None => Err(LoaderError::format(
+            dir,
+            "not a COLMAP model folder (no cameras.bin or cameras.txt)",
+        )),
+    }
+}
+
+/// Path of a model file, failing with a clear error when it is absent.
+pub(crate) fn model_file(dir: &Path, name: &str) -> Result<PathBuf> {
+    let p = dir.join(name);
+    if p.is_file() {
+        Ok(p)
+    } else {
+        Err(LoaderError::Missing {
+            path: p,
+            context: "COLMAP model file".into(),
+        })
+    }
+}
+
+#[cfg(test)]
+pub(crate) mod testutil {
+    use super::*;
+    use crate::camera::CameraModel;
+
+    /// A small model using every camera model, keypoints with and without
+    /// 3D points, and non-sorted file order.
+    pub fn sample_model() -> ColmapModel {
+        let mut m = ColmapModel::default();
+        for (i, model) in CameraModel::ALL.iter().enumerate() {
+            let id = i as u32 + 1;
+            let params = (0..model.num_params())
+                .map(|k| 100.0 + k as f64 * 0.37 - i as f64 / 3.0)
+                .collect();
+            m.cameras.insert(
+                id,
+                Camera {
+                    id,
+                    model: *model,
+                    width: 640 + i as u64,
+                    height: 480,
+                    params,
+                },
+            );
+        }
+        for id in [3u32, 1, 2] {
+            let pose = Pose {
+                qvec: [0.9, 0.1 * id as f64, -0.2, 0.3],
+                tvec: [1.0 / 3.0, -2.5e-7, id as f64],
+            };
+            let mut im = ColmapImage::new(id, pose, id, format!("frame_{id:04}.jpg"));
+            im.points2d = vec![
+                Point2D {
+                    xy: [10.5, 20.25],
+                    point3d_id: Some(7),
+                },
+                Point2D {
+                    xy: [0.1, 1e6],
+                    point3d_id: None,
+                },
+            ];
+            m.images.insert(id, im);
+        }
+        m.points3d.insert(
+            7,
+            Point3D {
+                id: 7,
+                xyz: [1.0, 2.0, -3.5],
+                rgb: [255, 0, 17],
+                error: 0.42,
+                track: vec![(3, 0), (1, 0), (2, 0)],
+            },
+        );
+        m.points3d.insert(
+            9,
+            Point3D {
+                id: 9,
+                xyz: [0.0; 3],
+                rgb: [1, 2, 3],
+                error: -1.0,
+                track: vec![],
+            },
+        );
+        m.file_order = FileOrder {
+            cameras: (1..=12).collect(),
+            images: vec![3, 1, 2],
+            points3d: vec![9, 7],
+        };
+        m
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    #![allow(clippy::unwrap_used, clippy::expect_used)]
+    use super::*;
+
+    #[test]
+    fn read_model_detects_format_and_ignores_colmap4_extras() {
+        let dir = tempfile::tempdir().unwrap();
+        let m = testutil::sample_model();
+        let bin = dir.path().join("bin");
+        let txt = dir.path().join("txt");
+        write_model_binary(&m, &bin).unwrap();
+        write_model_text(&m, &txt).unwrap();
+        std::fs::write(bin.join("rigs.bin"), [1u8, 2, 3]).unwrap();
+        std::fs::write(bin.join("frames.bin"), [9u8; 17]).unwrap();
+        std::fs::write(txt.join("rigs.txt"), "# whatever\n1 2 3\n").unwrap();
+        assert_eq!(detect_format(&bin), Some(ModelFormat::Binary));
+        assert_eq!(detect_format(&txt), Some(ModelFormat::Text));
+        assert_eq!(read_model(&bin).unwrap(), m);
+        let t = read_model(&txt).unwrap();
+        assert_eq!(t.cameras, m.cameras);
+        assert_eq!(t.images, m.images);
+        assert_eq!(t.points3d, m.points3d);
+        let e = read_model(dir.path()).unwrap_err().to_string();
+        assert!(e.contains("not a COLMAP model"), "{e}");
+        // find_model_dir looks into sparse/0.
+        let scene = dir.path().join("scene");
+        write_model_binary(&m, scene.join("sparse/0")).unwrap();
+        assert_eq!(find_model_dir(&scene), Some(scene.join("sparse/0")));
+    }
+
+    #[test]
+    fn missing_model_file_is_named() {
+        let dir = tempfile::tempdir().unwrap();
+        write_model_binary(&testutil::sample_model(), dir.path()).unwrap();
+        std::fs::remove_file(dir.path().join("points3D.bin")).unwrap();
+        let e = read_model(dir.path()).unwrap_err().to_string();
+        assert!(e.contains("points3D.bin") && e.contains("not found"), "{e}");
+    }
+
+    #[test]
+    fn validate_catches_missing_camera() {
+        let mut m = testutil::sample_model();
+        m.images.get_mut(&1).unwrap().camera_id = 99;
+        let e = m.validate(Path::new("model")).unwrap_err().to_string();
+        assert!(e.contains("missing camera 99"), "{e}");
+    }
+}
