@@ -9,6 +9,7 @@ pub mod colmap;
 pub mod error;
 pub mod io;
 pub mod scene;
+pub mod synth;
 
 pub use camera::{Camera, CameraModel, Intrinsics, Pose};
 pub use error::{LoaderError, Result};

@@ -59,11 +59,15 @@ pub struct Sample {
     pub tri: u32,
     pub u: f32,
     pub v: f32,
-    pub lod: f32,
 }
 
 impl Sample {
-    pub const EMPTY: Sample = Sample { depth: f32::INFINITY, tri: NONE, u: 0.0, v: 0.0, lod: 0.0 };
+    pub const EMPTY: Sample = Sample {
+        depth: f32::INFINITY,
+        tri: NONE,
+        u: 0.0,
+        v: 0.0,
+    };
 }
 
 /// A triangle after clipping and projection to sample coordinates, with
@@ -98,7 +102,8 @@ pub fn setup(view: &View, tris: &[Tri], textures: &[Texture]) -> Vec<Setup> {
     let k = view.intr;
     let mut out = Vec::with_capacity(tris.len());
     for (idx, tri) in tris.iter().enumerate() {
-        let cam: Vec<(Vector3<f64>, [f64; 2])> = tri.v.iter().map(|v| (r * v.p + t, v.uv)).collect();
+        let cam: Vec<(Vector3<f64>, [f64; 2])> =
+            tri.v.iter().map(|v| (r * v.p + t, v.uv)).collect();
         if cam.iter().all(|(p, _)| p.z < NEAR) {
             continue;
         }
@@ -113,7 +118,10 @@ pub fn setup(view: &View, tris: &[Tri], textures: &[Texture]) -> Vec<Setup> {
             if ina != inb {
                 let f = (NEAR - a.0.z) / (b.0.z - a.0.z);
                 let p = a.0 + (b.0 - a.0) * f;
-                let uv = [a.1[0] + (b.1[0] - a.1[0]) * f, a.1[1] + (b.1[1] - a.1[1]) * f];
+                let uv = [
+                    a.1[0] + (b.1[0] - a.1[0]) * f,
+                    a.1[1] + (b.1[1] - a.1[1]) * f,
+                ];
                 poly.push((Vector3::new(p.x, p.y, NEAR), uv));
             }
         }
@@ -121,10 +129,18 @@ pub fn setup(view: &View, tris: &[Tri], textures: &[Texture]) -> Vec<Setup> {
             .iter()
             .map(|(p, uv)| {
                 let iz = 1.0 / p.z;
-                [(k.fx * p.x * iz + k.cx) * s, (k.fy * p.y * iz + k.cy) * s, iz, uv[0] * iz, uv[1] * iz]
+                [
+                    (k.fx * p.x * iz + k.cx) * s,
+                    (k.fy * p.y * iz + k.cy) * s,
+                    iz,
+                    uv[0] * iz,
+                    uv[1] * iz,
+                ]
             })
             .collect();
-        let tex = textures.get(tri.material as usize).map_or((1, 1), |t| t.size());
+        let tex = textures
+            .get(tri.material as usize)
+            .map_or((1, 1), |t| t.size());
         for j in 1..proj.len().saturating_sub(1) {
             let (p0, p1, p2) = (proj[0], proj[j], proj[j + 1]);
             let det = (p1[0] - p0[0]) * (p2[1] - p0[1]) - (p2[0] - p0[0]) * (p1[1] - p0[1]);
@@ -165,55 +181,88 @@ pub fn setup(view: &View, tris: &[Tri], textures: &[Texture]) -> Vec<Setup> {
     out
 }
 
+/// The sample columns of row `fy` that can lie inside the triangle: the
+/// three barycentric half-planes cut the row to an interval (one sample of
+/// margin; the exact test is still made per sample).
+fn row_span(st: &Setup, fy: f64, x0: usize, x1: usize) -> Option<(usize, usize)> {
+    let (mut lo, mut hi) = (x0 as f64 + 0.5, x1 as f64 + 0.5);
+    let b0 = [
+        -st.b1[0] - st.b2[0],
+        -st.b1[1] - st.b2[1],
+        1.0 - st.b1[2] - st.b2[2],
+    ];
+    for p in [&st.b1, &st.b2, &b0] {
+        let (a, c) = (p[0], p[1] * fy + p[2]);
+        if a > 1e-12 {
+            lo = lo.max(-c / a);
+        } else if a < -1e-12 {
+            hi = hi.min(-c / a);
+        } else if c < -1e-9 {
+            return None;
+        }
+    }
+    // Also rejects NaN bounds.
+    if lo.is_nan() || hi.is_nan() || lo > hi + 1.0 {
+        return None;
+    }
+    let xa = ((lo - 1.5).ceil().max(x0 as f64)) as usize;
+    let xb = ((hi + 0.5).floor().min(x1 as f64)) as usize;
+    (xa <= xb).then_some((xa, xb))
+}
+
 /// Rasterise `setups` into `buf` (a `ws`×`hs` sample grid, row-major) with a
 /// depth test. With `limit`, a sample is only written where it is also
 /// nearer than `limit` (used to draw distractors over the static world).
 pub fn rasterize(setups: &[Setup], buf: &mut [Sample], ws: usize, limit: Option<&[Sample]>) {
-    buf.par_chunks_mut(ws * BAND).enumerate().for_each(|(band, chunk)| {
-        let row0 = band * BAND;
-        let rows = chunk.len() / ws;
-        for (id, st) in setups.iter().enumerate() {
-            let [x0, x1, y0, y1] = st.bounds;
-            let (ya, yb) = (y0.max(row0), y1.min(row0 + rows - 1));
-            if ya > yb {
-                continue;
-            }
-            for y in ya..=yb {
-                let fy = y as f64 + 0.5;
-                for x in x0..=x1 {
-                    let fx = x as f64 + 0.5;
-                    let b1 = eval(&st.b1, fx, fy);
-                    let b2 = eval(&st.b2, fx, fy);
-                    if b1 < -1e-9 || b2 < -1e-9 || b1 + b2 > 1.0 + 1e-9 {
+    buf.par_chunks_mut(ws * BAND)
+        .enumerate()
+        .for_each(|(band, chunk)| {
+            let row0 = band * BAND;
+            let rows = chunk.len() / ws;
+            for (id, st) in setups.iter().enumerate() {
+                let [x0, x1, y0, y1] = st.bounds;
+                let (ya, yb) = (y0.max(row0), y1.min(row0 + rows - 1));
+                if ya > yb {
+                    continue;
+                }
+                for y in ya..=yb {
+                    let fy = y as f64 + 0.5;
+                    let Some((xa, xb)) = row_span(st, fy, x0, x1) else {
                         continue;
+                    };
+                    for x in xa..=xb {
+                        let fx = x as f64 + 0.5;
+                        let b1 = eval(&st.b1, fx, fy);
+                        let b2 = eval(&st.b2, fx, fy);
+                        if b1 < -1e-9 || b2 < -1e-9 || b1 + b2 > 1.0 + 1e-9 {
+                            continue;
+                        }
+                        let iz = eval(&st.iz, fx, fy);
+                        if iz <= 0.0 {
+                            continue;
+                        }
+                        let z = (1.0 / iz) as f32;
+                        let i = (y - row0) * ws + x;
+                        if z >= chunk[i].depth {
+                            continue;
+                        }
+                        if let Some(l) = limit
+                            && z >= l[y * ws + x].depth
+                        {
+                            continue;
+                        }
+                        let u = eval(&st.uz, fx, fy) / iz;
+                        let v = eval(&st.vz, fx, fy) / iz;
+                        chunk[i] = Sample {
+                            depth: z,
+                            tri: id as u32,
+                            u: u as f32,
+                            v: v as f32,
+                        };
                     }
-                    let iz = eval(&st.iz, fx, fy);
-                    if iz <= 0.0 {
-                        continue;
-                    }
-                    let z = (1.0 / iz) as f32;
-                    let i = (y - row0) * ws + x;
-                    if z >= chunk[i].depth {
-                        continue;
-                    }
-                    if let Some(l) = limit
-                        && z >= l[y * ws + x].depth
-                    {
-                        continue;
-                    }
-                    let u = eval(&st.uz, fx, fy) / iz;
-                    let v = eval(&st.vz, fx, fy) / iz;
-                    // d(u)/dx = (d(u/z)/dx − u · d(1/z)/dx) / (1/z), in texels.
-                    let dudx = (st.uz[0] - u * st.iz[0]) / iz * st.tex[0];
-                    let dvdx = (st.vz[0] - v * st.iz[0]) / iz * st.tex[1];
-                    let dudy = (st.uz[1] - u * st.iz[1]) / iz * st.tex[0];
-                    let dvdy = (st.vz[1] - v * st.iz[1]) / iz * st.tex[1];
-                    let rho = dudx.hypot(dvdx).max(dudy.hypot(dvdy));
-                    chunk[i] = Sample { depth: z, tri: id as u32, u: u as f32, v: v as f32, lod: rho.max(1e-9).log2() as f32 };
                 }
             }
-        }
-    });
+        });
 }
 
 /// A fresh, empty sample buffer for `view`.
@@ -226,16 +275,41 @@ pub fn new_buffer(view: &View) -> Vec<Sample> {
 fn sky(view: &View, rt: &Matrix3<f64>, sx: usize, sy: usize) -> Rgb {
     let s = view.ss as f64;
     let k = view.intr;
-    let d = Vector3::new(((sx as f64 + 0.5) / s - k.cx) / k.fx, ((sy as f64 + 0.5) / s - k.cy) / k.fy, 1.0);
+    let d = Vector3::new(
+        ((sx as f64 + 0.5) / s - k.cx) / k.fx,
+        ((sy as f64 + 0.5) / s - k.cy) / k.fy,
+        1.0,
+    );
     let w = rt * d;
     let e = (w.z / w.norm()).clamp(0.0, 1.0) as f32;
     [0.80 - 0.40 * e, 0.85 - 0.28 * e, 0.92 - 0.05 * e]
 }
 
+/// log2 to about 0.01 from the float's exponent and a quadratic in the mantissa.
+fn fast_log2(x: f32) -> f32 {
+    let b = x.max(1e-30).to_bits();
+    let e = ((b >> 23) & 0xFF) as f32 - 127.0;
+    let m = f32::from_bits((b & 0x007F_FFFF) | 0x3F80_0000);
+    e + (-0.344_848_43 * m + 2.024_665_8) * m - 1.674_877_6
+}
+
+/// Mip level of a sample at sample coordinates (fx, fy): log2 of the larger
+/// texel footprint, from d(u)/dx = (d(u/z)/dx − u · d(1/z)/dx) / (1/z).
+fn lod(st: &Setup, s: &Sample) -> f32 {
+    let iz = 1.0 / s.depth as f64;
+    let (u, v) = (s.u as f64, s.v as f64);
+    let dudx = (st.uz[0] - u * st.iz[0]) / iz * st.tex[0];
+    let dvdx = (st.vz[0] - v * st.iz[0]) / iz * st.tex[1];
+    let dudy = (st.uz[1] - u * st.iz[1]) / iz * st.tex[0];
+    let dvdy = (st.vz[1] - v * st.iz[1]) / iz * st.tex[1];
+    let rho2 = (dudx * dudx + dvdx * dvdx).max(dudy * dudy + dvdy * dvdy);
+    0.5 * fast_log2(rho2 as f32)
+}
+
 fn shade(s: &Sample, setups: &[Setup], textures: &[Texture]) -> Option<Rgb> {
     let st = setups.get(s.tri as usize)?;
     let tex = textures.get(st.material as usize)?;
-    let c = tex.sample(s.u, s.v, s.lod);
+    let c = tex.sample(s.u, s.v, lod(st, s));
     Some([c[0] * st.shade, c[1] * st.shade, c[2] * st.shade])
 }
 
@@ -284,7 +358,8 @@ pub fn resolve(view: &View, p: &Passes) -> Resolved {
                 for sy in y * s..(y + 1) * s {
                     for sx in x * s..(x + 1) * s {
                         let i = sy * ws + sx;
-                        let sc = shade(&p.static_buf[i], p.static_setups, p.textures).unwrap_or_else(|| sky(view, &rt, sx, sy));
+                        let sc = shade(&p.static_buf[i], p.static_setups, p.textures)
+                            .unwrap_or_else(|| sky(view, &rt, sx, sy));
                         let fc = match shade(&p.dyn_buf[i], p.dyn_setups, p.textures) {
                             Some(d) => {
                                 n += 1;
@@ -305,5 +380,9 @@ pub fn resolve(view: &View, p: &Passes) -> Resolved {
                 cov[x] = n;
             }
         });
-    Resolved { clean, frame, coverage }
+    Resolved {
+        clean,
+        frame,
+        coverage,
+    }
 }

@@ -144,12 +144,22 @@ impl Default for WorldSpec {
 
 impl Default for PedestrianSpec {
     fn default() -> Self {
-        PedestrianSpec { start: [-4.0, 3.0], end: [4.0, 3.0], speed: 1.3, height: 1.75, offset: 0.0 }
+        PedestrianSpec {
+            start: [-4.0, 3.0],
+            end: [4.0, 3.0],
+            speed: 1.3,
+            height: 1.75,
+            offset: 0.0,
+        }
     }
 }
 
 fn check(ok: bool, what: &str) -> Result<()> {
-    if ok { Ok(()) } else { Err(LoaderError::Invalid(what.to_string())) }
+    if ok {
+        Ok(())
+    } else {
+        Err(LoaderError::Invalid(what.to_string()))
+    }
 }
 
 fn finite(v: &[f64]) -> bool {
@@ -159,36 +169,100 @@ fn finite(v: &[f64]) -> bool {
 impl SceneSpec {
     /// Check every field up front; the error names the field.
     pub fn validate(&self) -> Result<()> {
-        check((16..=8192).contains(&self.width), "width must be in 16..=8192")?;
-        check((16..=8192).contains(&self.height), "height must be in 16..=8192")?;
-        check((2..=100_000).contains(&self.frames), "frames must be in 2..=100000")?;
-        check(self.fov_x_deg > 10.0 && self.fov_x_deg < 150.0, "fov_x_deg must be in (10, 150)")?;
-        check((1..=8).contains(&self.supersample), "supersample must be in 1..=8")?;
+        check(
+            (16..=8192).contains(&self.width),
+            "width must be in 16..=8192",
+        )?;
+        check(
+            (16..=8192).contains(&self.height),
+            "height must be in 16..=8192",
+        )?;
+        check(
+            (2..=100_000).contains(&self.frames),
+            "frames must be in 2..=100000",
+        )?;
+        check(
+            self.fov_x_deg > 10.0 && self.fov_x_deg < 150.0,
+            "fov_x_deg must be in (10, 150)",
+        )?;
+        check(
+            (1..=8).contains(&self.supersample),
+            "supersample must be in 1..=8",
+        )?;
         check(self.fps.is_finite() && self.fps > 0.0, "fps must be > 0")?;
         check(self.test_views <= 10_000, "test_views must be <= 10000")?;
         check(finite(&self.test_offset), "test_offset must be finite")?;
         check(self.points3d <= 1_000_000, "points3d must be <= 1000000")?;
         let c = &self.camera;
-        check(!c.eye.is_empty() && !c.target.is_empty(), "camera.eye and camera.target need at least one point")?;
-        check(c.eye.iter().chain(&c.target).all(|p| finite(p)), "camera points must be finite")?;
-        check(c.jitter_pos.is_finite() && c.jitter_pos >= 0.0, "camera.jitter_pos must be >= 0")?;
-        check(c.jitter_rot_deg.is_finite() && (0.0..10.0).contains(&c.jitter_rot_deg), "camera.jitter_rot_deg must be in [0, 10)")?;
-        check(c.jitter_hz.is_finite() && c.jitter_hz > 0.0, "camera.jitter_hz must be > 0")?;
+        check(
+            !c.eye.is_empty() && !c.target.is_empty(),
+            "camera.eye and camera.target need at least one point",
+        )?;
+        check(
+            c.eye.iter().chain(&c.target).all(|p| finite(p)),
+            "camera points must be finite",
+        )?;
+        check(
+            c.jitter_pos.is_finite() && c.jitter_pos >= 0.0,
+            "camera.jitter_pos must be >= 0",
+        )?;
+        check(
+            c.jitter_rot_deg.is_finite() && (0.0..10.0).contains(&c.jitter_rot_deg),
+            "camera.jitter_rot_deg must be in [0, 10)",
+        )?;
+        check(
+            c.jitter_hz.is_finite() && c.jitter_hz > 0.0,
+            "camera.jitter_hz must be > 0",
+        )?;
         let w = &self.world;
-        check(w.length.is_finite() && w.length > 2.0, "world.length must be > 2")?;
-        check(w.building_distance.is_finite() && w.building_distance > 1.0, "world.building_distance must be > 1")?;
-        check(finite(&w.building_height) && w.building_height[0] > 0.5 && w.building_height[1] >= w.building_height[0], "world.building_height must be [lo, hi] with 0.5 < lo <= hi")?;
+        check(
+            w.length.is_finite() && w.length > 2.0,
+            "world.length must be > 2",
+        )?;
+        check(
+            w.building_distance.is_finite() && w.building_distance > 1.0,
+            "world.building_distance must be > 1",
+        )?;
+        check(
+            finite(&w.building_height)
+                && w.building_height[0] > 0.5
+                && w.building_height[1] >= w.building_height[0],
+            "world.building_height must be [lo, hi] with 0.5 < lo <= hi",
+        )?;
         check(w.objects <= 1000, "world.objects must be <= 1000")?;
-        check(finite(&w.object_depth) && w.object_depth[1] >= w.object_depth[0], "world.object_depth must be [lo, hi] with lo <= hi")?;
-        check(w.texels_per_meter.is_finite() && w.texels_per_meter >= 4.0 && w.texels_per_meter <= 512.0, "world.texels_per_meter must be in [4, 512]")?;
-        check(w.clearance.is_finite() && w.clearance >= 0.0, "world.clearance must be >= 0")?;
+        check(
+            finite(&w.object_depth) && w.object_depth[1] >= w.object_depth[0],
+            "world.object_depth must be [lo, hi] with lo <= hi",
+        )?;
+        check(
+            w.texels_per_meter.is_finite()
+                && w.texels_per_meter >= 4.0
+                && w.texels_per_meter <= 512.0,
+            "world.texels_per_meter must be in [4, 512]",
+        )?;
+        check(
+            w.clearance.is_finite() && w.clearance >= 0.0,
+            "world.clearance must be >= 0",
+        )?;
         for (i, p) in self.pedestrians.iter().enumerate() {
             let ok = finite(&p.start) && finite(&p.end) && p.offset.is_finite();
-            check(ok, &format!("pedestrians[{i}]: points and offset must be finite"))?;
-            check(p.speed.is_finite() && p.speed > 0.0 && p.speed < 20.0, &format!("pedestrians[{i}].speed must be in (0, 20) m/s"))?;
-            check(p.height.is_finite() && p.height > 0.3 && p.height < 3.0, &format!("pedestrians[{i}].height must be in (0.3, 3) m"))?;
+            check(
+                ok,
+                &format!("pedestrians[{i}]: points and offset must be finite"),
+            )?;
+            check(
+                p.speed.is_finite() && p.speed > 0.0 && p.speed < 20.0,
+                &format!("pedestrians[{i}].speed must be in (0, 20) m/s"),
+            )?;
+            check(
+                p.height.is_finite() && p.height > 0.3 && p.height < 3.0,
+                &format!("pedestrians[{i}].height must be in (0.3, 3) m"),
+            )?;
             let len = (p.end[0] - p.start[0]).hypot(p.end[1] - p.start[1]);
-            check(len > 0.1, &format!("pedestrians[{i}]: start and end must be > 0.1 m apart"))?;
+            check(
+                len > 0.1,
+                &format!("pedestrians[{i}]: start and end must be > 0.1 m apart"),
+            )?;
         }
         Ok(())
     }
@@ -198,7 +272,9 @@ impl SceneSpec {
 pub fn load_spec(path: impl AsRef<Path>) -> Result<SceneSpec> {
     let path = path.as_ref();
     let text = std::fs::read_to_string(path).map_err(|e| LoaderError::io(path, e))?;
-    let spec: SceneSpec = toml::from_str(&text).map_err(|e| LoaderError::format(path, e.to_string().replace('\n', " ")))?;
-    spec.validate().map_err(|e| LoaderError::format(path, e.to_string()))?;
+    let spec: SceneSpec = toml::from_str(&text)
+        .map_err(|e| LoaderError::format(path, e.to_string().replace('\n', " ")))?;
+    spec.validate()
+        .map_err(|e| LoaderError::format(path, e.to_string()))?;
     Ok(spec)
 }

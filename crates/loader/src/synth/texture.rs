@@ -24,7 +24,11 @@ pub fn mix64(mut z: u64) -> u64 {
 
 /// Hash of a lattice point and a seed, uniform in [0, 1).
 pub fn hash01(x: i64, y: i64, seed: u64) -> f64 {
-    let h = mix64(seed ^ mix64((x as u64).wrapping_mul(0x1656_67B1) ^ mix64(y as u64)));
+    let k = (x as u64).wrapping_mul(0x9E37_79B9_7F4A_7C15)
+        ^ (y as u64)
+            .wrapping_mul(0xC2B2_AE3D_27D4_EB4F)
+            .rotate_left(29);
+    let h = mix64(seed.wrapping_mul(0xD6E8_FEB8_6659_FD93) ^ k);
     (h >> 11) as f64 / (1u64 << 53) as f64
 }
 
@@ -49,7 +53,12 @@ pub fn value_noise(x: f64, y: f64, seed: u64) -> f64 {
 pub fn fbm(x: f64, y: f64, freq: f64, octaves: u32, seed: u64) -> f64 {
     let (mut sum, mut amp, mut norm, mut f) = (0.0, 1.0, 0.0, freq);
     for o in 0..octaves {
-        sum += amp * value_noise(x * f + o as f64 * 17.3, y * f - o as f64 * 9.1, seed.wrapping_add(o as u64));
+        sum += amp
+            * value_noise(
+                x * f + o as f64 * 17.3,
+                y * f - o as f64 * 9.1,
+                seed.wrapping_add(o as u64),
+            );
         norm += amp;
         amp *= 0.5;
         f *= 2.0;
@@ -59,7 +68,11 @@ pub fn fbm(x: f64, y: f64, freq: f64, octaves: u32, seed: u64) -> f64 {
 
 fn lerp3(a: Rgb, b: Rgb, t: f64) -> Rgb {
     let t = t as f32;
-    [a[0] + (b[0] - a[0]) * t, a[1] + (b[1] - a[1]) * t, a[2] + (b[2] - a[2]) * t]
+    [
+        a[0] + (b[0] - a[0]) * t,
+        a[1] + (b[1] - a[1]) * t,
+        a[2] + (b[2] - a[2]) * t,
+    ]
 }
 
 fn scale3(a: Rgb, s: f64) -> Rgb {
@@ -101,7 +114,7 @@ impl Style {
     pub fn texel(&self, x: f64, y: f64) -> Rgb {
         let s = self.seed;
         let p = &self.palette;
-        let grain = fbm(x, y, 6.0, 5, s ^ 0xA1);
+        let grain = fbm(x, y, 6.0, 4, s ^ 0xA1);
         let fine = value_noise(x * 45.0, y * 45.0, s ^ 0xB2);
         let c = match self.pattern {
             Pattern::Paving => {
@@ -113,11 +126,19 @@ impl Style {
                 let col = ((x + off) / w).floor();
                 let rx = (x + off) / w - col;
                 let h = hash01(col as i64, row as i64, s ^ 0x55);
-                let base = lerp3(p[(h * 3.0) as usize % 3], p[(h * 7.0) as usize % 3], hash01(col as i64, row as i64, s ^ 9));
+                let base = lerp3(
+                    p[(h * 3.0) as usize % 3],
+                    p[(h * 7.0) as usize % 3],
+                    hash01(col as i64, row as i64, s ^ 9),
+                );
                 let mortar = rx < 0.05 || ry < 0.07;
                 let stone = scale3(base, 0.75 + 0.5 * grain + 0.15 * (fine - 0.5));
                 let stain = fbm(x, y, 0.35, 3, s ^ 0x77);
-                let c = if mortar { scale3(p[3], 0.6 + 0.4 * fine) } else { stone };
+                let c = if mortar {
+                    scale3(p[3], 0.6 + 0.4 * fine)
+                } else {
+                    stone
+                };
                 lerp3(c, scale3(p[3], 0.5), ((stain - 0.62) * 3.0).clamp(0.0, 0.6))
             }
             Pattern::Brick => {
@@ -127,14 +148,20 @@ impl Style {
                 let (fx, fy) = (wx - cx, wy - cy);
                 let hw = hash01(cx as i64, cy as i64, s ^ 0x33);
                 if y > 0.9 && (0.25..0.75).contains(&fx) && (0.2..0.75).contains(&fy) {
-                    let frame = !(0.28..0.72).contains(&fx) || !(0.24..0.71).contains(&fy) || (fx - 0.5).abs() < 0.015;
+                    let frame = !(0.28..0.72).contains(&fx)
+                        || !(0.24..0.71).contains(&fy)
+                        || (fx - 0.5).abs() < 0.015;
                     if frame {
                         scale3([0.9, 0.88, 0.82], 0.8 + 0.2 * fine)
                     } else {
                         let curtain = [hw as f32, hash01(cx as i64, 5, s) as f32 * 0.7, 0.3];
                         let refl = fbm(x + hw * 10.0, y, 1.5, 4, s ^ 0x44);
                         let open = hash01(cx as i64 + 100, cy as i64, s) * 0.7;
-                        let glass = if fy > open { curtain } else { [0.12, 0.16, 0.22] };
+                        let glass = if fy > open {
+                            curtain
+                        } else {
+                            [0.12, 0.16, 0.22]
+                        };
                         lerp3(glass, [0.75, 0.82, 0.9], (refl - 0.4).clamp(0.0, 0.5))
                     }
                 } else {
@@ -145,9 +172,20 @@ impl Style {
                     let col = bx.floor();
                     let h = hash01(col as i64, row as i64, s);
                     let mortar = (bx - col) < 0.06 || (y / bh - row) < 0.12;
-                    let brick = scale3(lerp3(p[0], p[1], h), 0.7 + 0.45 * grain + 0.2 * (fine - 0.5));
-                    let c = if mortar { scale3(p[3], 0.85 + 0.3 * fine) } else { brick };
-                    lerp3(c, p[2], ((fbm(x, y, 0.5, 3, s ^ 0x99) - 0.55) * 2.5).clamp(0.0, 0.7))
+                    let brick = scale3(
+                        lerp3(p[0], p[1], h),
+                        0.7 + 0.45 * grain + 0.2 * (fine - 0.5),
+                    );
+                    let c = if mortar {
+                        scale3(p[3], 0.85 + 0.3 * fine)
+                    } else {
+                        brick
+                    };
+                    lerp3(
+                        c,
+                        p[2],
+                        ((fbm(x, y, 0.5, 3, s ^ 0x99) - 0.55) * 2.5).clamp(0.0, 0.7),
+                    )
                 }
             }
             Pattern::Plaster => {
@@ -155,7 +193,8 @@ impl Style {
                 let blot = fbm(x, y, 0.4, 3, s ^ 0x12);
                 let c = lerp3(p[0], p[1], n);
                 let c = lerp3(c, p[2], ((blot - 0.55) * 4.0).clamp(0.0, 1.0));
-                let band = ((y * 1.3 + 0.3 * value_noise(x * 0.7, 0.0, s)).fract() < 0.08) as u8 as f64;
+                let band =
+                    ((y * 1.3 + 0.3 * value_noise(x * 0.7, 0.0, s)).fract() < 0.08) as u8 as f64;
                 lerp3(scale3(c, 0.85 + 0.3 * fine), p[3], band * 0.8)
             }
             Pattern::Checker => {
@@ -209,7 +248,11 @@ impl Style {
             }
             Pattern::Skin => scale3(lerp3(p[0], p[1], grain), 0.9 + 0.15 * (fine - 0.5)),
         };
-        [c[0].clamp(0.0, 1.0), c[1].clamp(0.0, 1.0), c[2].clamp(0.0, 1.0)]
+        [
+            c[0].clamp(0.0, 1.0),
+            c[1].clamp(0.0, 1.0),
+            c[2].clamp(0.0, 1.0),
+        ]
     }
 }
 
@@ -261,7 +304,11 @@ impl Texture {
                     nd[j * nw + i] = [acc[0] * 0.25, acc[1] * 0.25, acc[2] * 0.25];
                 }
             }
-            levels.push(Level { w: nw, h: nh, data: nd });
+            levels.push(Level {
+                w: nw,
+                h: nh,
+                data: nd,
+            });
         }
         Texture { levels }
     }
@@ -303,7 +350,11 @@ impl Texture {
             return a;
         }
         let b = self.bilinear(l0 as usize + 1, u, v);
-        [a[0] + (b[0] - a[0]) * t, a[1] + (b[1] - a[1]) * t, a[2] + (b[2] - a[2]) * t]
+        [
+            a[0] + (b[0] - a[0]) * t,
+            a[1] + (b[1] - a[1]) * t,
+            a[2] + (b[2] - a[2]) * t,
+        ]
     }
 }
 
@@ -323,7 +374,11 @@ mod tests {
 
     #[test]
     fn mips_preserve_mean_and_sampling_is_clamped() {
-        let style = Style { pattern: Pattern::Checker, palette: [[1.0, 0.0, 0.0], [0.0, 1.0, 0.0], [0.0, 0.0, 1.0], [0.5; 3]], seed: 1 };
+        let style = Style {
+            pattern: Pattern::Checker,
+            palette: [[1.0, 0.0, 0.0], [0.0, 1.0, 0.0], [0.0, 0.0, 1.0], [0.5; 3]],
+            seed: 1,
+        };
         let t = Texture::bake(&style, 1.0, 1.0, 64.0);
         let base = &t.levels[0];
         let mean: f32 = base.data.iter().map(|c| c[1]).sum::<f32>() / base.data.len() as f32;

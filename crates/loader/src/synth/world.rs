@@ -51,8 +51,16 @@ fn push_quad(tris: &mut Vec<Tri>, q: [V3; 4], material: u32) {
     let shade = light(&n.normalize());
     let uv = [[0.0, 1.0], [1.0, 1.0], [1.0, 0.0], [0.0, 0.0]];
     let v = |i: usize| Vertex { p: q[i], uv: uv[i] };
-    tris.push(Tri { v: [v(0), v(1), v(2)], material, shade });
-    tris.push(Tri { v: [v(0), v(2), v(3)], material, shade });
+    tris.push(Tri {
+        v: [v(0), v(1), v(2)],
+        material,
+        shade,
+    });
+    tris.push(Tri {
+        v: [v(0), v(2), v(3)],
+        material,
+        shade,
+    });
 }
 
 /// The five visible faces (no bottom) of a box given its 8 corners, ordered
@@ -81,10 +89,30 @@ fn box_corners(lo: V3, hi: V3) -> [V3; 8] {
 }
 
 const EARTH: [[Rgb; 4]; 4] = [
-    [[0.62, 0.58, 0.52], [0.48, 0.46, 0.44], [0.70, 0.66, 0.58], [0.25, 0.23, 0.21]],
-    [[0.55, 0.50, 0.45], [0.66, 0.60, 0.50], [0.42, 0.40, 0.38], [0.22, 0.20, 0.18]],
-    [[0.60, 0.35, 0.25], [0.72, 0.45, 0.32], [0.35, 0.33, 0.30], [0.80, 0.78, 0.72]],
-    [[0.78, 0.74, 0.62], [0.60, 0.66, 0.70], [0.45, 0.40, 0.32], [0.30, 0.28, 0.30]],
+    [
+        [0.62, 0.58, 0.52],
+        [0.48, 0.46, 0.44],
+        [0.70, 0.66, 0.58],
+        [0.25, 0.23, 0.21],
+    ],
+    [
+        [0.55, 0.50, 0.45],
+        [0.66, 0.60, 0.50],
+        [0.42, 0.40, 0.38],
+        [0.22, 0.20, 0.18],
+    ],
+    [
+        [0.60, 0.35, 0.25],
+        [0.72, 0.45, 0.32],
+        [0.35, 0.33, 0.30],
+        [0.80, 0.78, 0.72],
+    ],
+    [
+        [0.78, 0.74, 0.62],
+        [0.60, 0.66, 0.70],
+        [0.45, 0.40, 0.32],
+        [0.30, 0.28, 0.30],
+    ],
 ];
 const VIVID: [Rgb; 8] = [
     [0.85, 0.15, 0.12],
@@ -109,19 +137,22 @@ fn vivid(rng: &mut Pcg64) -> [Rgb; 4] {
     p
 }
 
-struct Builder<'a> {
+struct Builder {
     tris: Vec<Tri>,
     textures: Vec<Texture>,
     rng: Pcg64,
     tpm: f64,
-    spec: &'a SceneSpec,
 }
 
-impl Builder<'_> {
+impl Builder {
     /// A quad with its own texture, baked at the face's metric size.
     fn face(&mut self, q: [V3; 4], pattern: Pattern, palette: [Rgb; 4]) {
         let seed = mix64(self.rng.random::<u64>());
-        let style = Style { pattern, palette, seed };
+        let style = Style {
+            pattern,
+            palette,
+            seed,
+        };
         let tex = Texture::bake(&style, (q[1] - q[0]).norm(), (q[3] - q[0]).norm(), self.tpm);
         self.textures.push(tex);
         push_quad(&mut self.tris, q, (self.textures.len() - 1) as u32);
@@ -138,7 +169,11 @@ impl Builder<'_> {
 fn seg_dist(p: [f64; 2], a: [f64; 2], b: [f64; 2]) -> f64 {
     let (dx, dy) = (b[0] - a[0], b[1] - a[1]);
     let l2 = dx * dx + dy * dy;
-    let t = if l2 > 0.0 { (((p[0] - a[0]) * dx + (p[1] - a[1]) * dy) / l2).clamp(0.0, 1.0) } else { 0.0 };
+    let t = if l2 > 0.0 {
+        (((p[0] - a[0]) * dx + (p[1] - a[1]) * dy) / l2).clamp(0.0, 1.0)
+    } else {
+        0.0
+    };
     (p[0] - a[0] - t * dx).hypot(p[1] - a[1] - t * dy)
 }
 
@@ -151,36 +186,73 @@ impl World {
             textures: Vec::new(),
             rng: Pcg64::seed_from_u64(mix64(spec.seed ^ 0x5EED_0001)),
             tpm: w.texels_per_meter,
-            spec,
         };
         let (hx, yb) = (w.length / 2.0, w.building_distance);
         let y_back = spec.camera.eye.iter().map(|e| e[1]).fold(0.0f64, f64::min) - 6.0;
-        let y_far = yb + 8.0;
+        let y_far = yb + 2.5;
         // Ground (texture v runs from the far edge at the top to the near edge).
         let pal = jitter_palette(EARTH[b.rng.random_range(0..2)], &mut b.rng, 0.04);
-        b.face([V3::new(-hx, y_back, 0.0), V3::new(hx, y_back, 0.0), V3::new(hx, y_far, 0.0), V3::new(-hx, y_far, 0.0)], Pattern::Paving, pal);
+        b.face(
+            [
+                V3::new(-hx, y_back, 0.0),
+                V3::new(hx, y_back, 0.0),
+                V3::new(hx, y_far, 0.0),
+                V3::new(-hx, y_far, 0.0),
+            ],
+            Pattern::Paving,
+            pal,
+        );
         // Side walls closing the street, facing inwards.
         for side in [-1.0, 1.0] {
             let x = side * hx;
-            let (ya, yc) = if side < 0.0 { (y_far, y_back) } else { (y_back, y_far) };
+            let y_near = y_back + 5.0;
+            let (ya, yc) = if side < 0.0 {
+                (y_far, y_near)
+            } else {
+                (y_near, y_far)
+            };
             let pal = jitter_palette(EARTH[3], &mut b.rng, 0.08);
-            b.face([V3::new(x, ya, 0.0), V3::new(x, yc, 0.0), V3::new(x, yc, 7.0), V3::new(x, ya, 7.0)], Pattern::Plaster, pal);
+            b.face(
+                [
+                    V3::new(x, ya, 0.0),
+                    V3::new(x, yc, 0.0),
+                    V3::new(x, yc, 7.0),
+                    V3::new(x, ya, 7.0),
+                ],
+                Pattern::Plaster,
+                pal,
+            );
         }
         // A row of buildings with staggered façades.
         let mut x = -hx;
         while x < hx - 0.1 {
             let bw = b.rng.random_range(3.0..7.0f64).min(hx - x);
-            let h = b.rng.random_range(w.building_height[0]..=w.building_height[1]);
+            let h = b
+                .rng
+                .random_range(w.building_height[0]..=w.building_height[1]);
             let yf = yb + b.rng.random_range(0.0..1.2);
             let brick = b.rng.random_bool(0.6);
             let pal = jitter_palette(EARTH[b.rng.random_range(0..4)], &mut b.rng, 0.06);
-            let c = box_corners(V3::new(x, yf, 0.0), V3::new(x + bw, y_far, h));
-            b.solid(&c, if brick { Pattern::Brick } else { Pattern::Plaster }, pal, &[0, 1, 3, 4]);
+            // Roofs are never seen from street level; sides only between staggered façades.
+            let c = box_corners(V3::new(x, yf, 0.0), V3::new(x + bw, yb + 2.5, h));
+            b.solid(
+                &c,
+                if brick {
+                    Pattern::Brick
+                } else {
+                    Pattern::Plaster
+                },
+                pal,
+                &[0, 1, 3],
+            );
             x += bw;
         }
         // Objects at several depths, kept clear of walkers and the camera.
-        let mut keep_out: Vec<([f64; 2], [f64; 2], f64)> =
-            spec.pedestrians.iter().map(|p| (p.start, p.end, 0.35 * p.height / 1.75 + w.clearance)).collect();
+        let mut keep_out: Vec<([f64; 2], [f64; 2], f64)> = spec
+            .pedestrians
+            .iter()
+            .map(|p| (p.start, p.end, 0.35 * p.height / 1.75 + w.clearance))
+            .collect();
         let eyes = &spec.camera.eye;
         for (i, e) in eyes.iter().enumerate() {
             let n = eyes.get(i + 1).unwrap_or(e);
@@ -191,24 +263,40 @@ impl World {
         while placed.len() < w.objects as usize && tries < 200 * (w.objects as usize + 1) {
             tries += 1;
             let kind = b.rng.random_range(0..4u32);
-            let (sx, sy, sz) = match kind {
+            let (sx, sy, sz): (f64, f64, f64) = match kind {
                 0 => {
                     let s = b.rng.random_range(0.5..1.2);
-                    (s * b.rng.random_range(0.8..1.6), s, s * b.rng.random_range(0.7..1.2))
+                    (
+                        s * b.rng.random_range(0.8..1.6),
+                        s,
+                        s * b.rng.random_range(0.7..1.2),
+                    )
                 }
                 1 => {
                     let s = b.rng.random_range(0.3..0.55);
                     (s, s, b.rng.random_range(2.2..4.0))
                 }
-                2 => (b.rng.random_range(1.0..2.0), 0.12, b.rng.random_range(1.5..2.4)),
-                _ => (b.rng.random_range(1.5..2.5), b.rng.random_range(1.2..2.0), b.rng.random_range(2.2..2.8)),
+                2 => (
+                    b.rng.random_range(1.0..2.0),
+                    0.12,
+                    b.rng.random_range(1.5..2.4),
+                ),
+                _ => (
+                    b.rng.random_range(1.5..2.5),
+                    b.rng.random_range(1.2..2.0),
+                    b.rng.random_range(2.2..2.8),
+                ),
             };
             let px = b.rng.random_range(-hx + 1.5..hx - 1.5);
             let py = b.rng.random_range(w.object_depth[0]..=w.object_depth[1]);
             let yaw = b.rng.random_range(-0.5..0.5f64);
             let r = 0.5 * sx.hypot(sy);
-            if keep_out.iter().any(|(a, c, m)| seg_dist([px, py], *a, *c) < r + m)
-                || placed.iter().any(|(q, rq)| (q[0] - px).hypot(q[1] - py) < r + rq + 0.2)
+            if keep_out
+                .iter()
+                .any(|(a, c, m)| seg_dist([px, py], *a, *c) < r + m)
+                || placed
+                    .iter()
+                    .any(|(q, rq)| (q[0] - px).hypot(q[1] - py) < r + rq + 0.2)
                 || py + r > yb
             {
                 continue;
@@ -216,11 +304,24 @@ impl World {
             placed.push(([px, py], r));
             let rot = Rotation3::from_axis_angle(&Vector3::z_axis(), yaw);
             let centre = V3::new(px, py, 0.0);
-            let c = box_corners(V3::new(-sx / 2.0, -sy / 2.0, 0.0), V3::new(sx / 2.0, sy / 2.0, sz)).map(|p| centre + rot * p);
+            let c = box_corners(
+                V3::new(-sx / 2.0, -sy / 2.0, 0.0),
+                V3::new(sx / 2.0, sy / 2.0, sz),
+            )
+            .map(|p| centre + rot * p);
             let (pattern, pal) = match kind {
-                0 if b.rng.random_bool(0.5) => (Pattern::Wood, jitter_palette(EARTH[2], &mut b.rng, 0.1)),
+                0 if b.rng.random_bool(0.5) => {
+                    (Pattern::Wood, jitter_palette(EARTH[2], &mut b.rng, 0.1))
+                }
                 0 => (Pattern::Checker, vivid(&mut b.rng)),
-                1 => (if b.rng.random_bool(0.5) { Pattern::Plaster } else { Pattern::Checker }, jitter_palette(EARTH[b.rng.random_range(0..4)], &mut b.rng, 0.1)),
+                1 => (
+                    if b.rng.random_bool(0.5) {
+                        Pattern::Plaster
+                    } else {
+                        Pattern::Checker
+                    },
+                    jitter_palette(EARTH[b.rng.random_range(0..4)], &mut b.rng, 0.1),
+                ),
                 2 => (Pattern::Poster, vivid(&mut b.rng)),
                 _ => (Pattern::Poster, vivid(&mut b.rng)),
             };
@@ -232,18 +333,51 @@ impl World {
             let mut mats = [0u32; 4];
             let skin_tone = b.rng.random_range(0.35..0.95f32);
             let skin = [[skin_tone, skin_tone * 0.78, skin_tone * 0.62]; 4];
-            let hair = [[0.12, 0.08, 0.05], [0.25, 0.18, 0.1], [0.1, 0.1, 0.1], [0.3, 0.25, 0.2]];
-            let denim = [[0.12, 0.18, 0.38], [0.2, 0.25, 0.45], [0.1, 0.1, 0.12], [0.3, 0.3, 0.35]];
-            let styles = [(Pattern::Cloth, vivid(&mut b.rng)), (Pattern::Cloth, if b.rng.random_bool(0.5) { denim } else { vivid(&mut b.rng) }), (Pattern::Skin, skin), (Pattern::Skin, hair)];
+            let hair = [
+                [0.12, 0.08, 0.05],
+                [0.25, 0.18, 0.1],
+                [0.1, 0.1, 0.1],
+                [0.3, 0.25, 0.2],
+            ];
+            let denim = [
+                [0.12, 0.18, 0.38],
+                [0.2, 0.25, 0.45],
+                [0.1, 0.1, 0.12],
+                [0.3, 0.3, 0.35],
+            ];
+            let styles = [
+                (Pattern::Cloth, vivid(&mut b.rng)),
+                (
+                    Pattern::Cloth,
+                    if b.rng.random_bool(0.5) {
+                        denim
+                    } else {
+                        vivid(&mut b.rng)
+                    },
+                ),
+                (Pattern::Skin, skin),
+                (Pattern::Skin, hair),
+            ];
             for (m, (pattern, palette)) in mats.iter_mut().zip(styles) {
-                let style = Style { pattern, palette, seed: mix64(b.rng.random::<u64>()) };
-                b.textures.push(Texture::bake(&style, 0.5, 0.8, b.tpm.max(96.0)));
+                let style = Style {
+                    pattern,
+                    palette,
+                    seed: mix64(b.rng.random::<u64>()),
+                };
+                b.textures
+                    .push(Texture::bake(&style, 0.5, 0.8, b.tpm.max(96.0)));
                 *m = (b.textures.len() - 1) as u32;
             }
-            peds.push(Pedestrian { spec: p.clone(), materials: mats });
+            peds.push(Pedestrian {
+                spec: p.clone(),
+                materials: mats,
+            });
         }
-        let _ = b.spec;
-        World { tris: b.tris, textures: b.textures, peds }
+        World {
+            tris: b.tris,
+            textures: b.textures,
+            peds,
+        }
     }
 
     /// The pedestrians' triangles at time `t` seconds.
@@ -262,7 +396,11 @@ pub fn walker_position(p: &PedestrianSpec, t: f64) -> ([f64; 2], f64, f64) {
     let len = dx.hypot(dy);
     let d = p.offset + p.speed * t;
     let m = d.rem_euclid(2.0 * len);
-    let (f, dir) = if m < len { (m / len, 1.0) } else { (2.0 - m / len, -1.0) };
+    let (f, dir) = if m < len {
+        (m / len, 1.0)
+    } else {
+        (2.0 - m / len, -1.0)
+    };
     let pos = [p.start[0] + dx * f, p.start[1] + dy * f];
     let yaw = (dy * dir).atan2(dx * dir);
     (pos, yaw, d)
@@ -280,13 +418,55 @@ fn pose_pedestrian(p: &Pedestrian, t: f64, tris: &mut Vec<Tri>) {
     let [shirt, trousers, skin, hair] = p.materials;
     // (lo, hi) in the part frame, pivot in the body frame, swing angle, material.
     let parts: [(V3, V3, V3, f64, u32); 7] = [
-        (V3::new(-0.07, -0.08, -0.88), V3::new(0.07, 0.08, 0.0), V3::new(0.0, 0.1, 0.9), swing, trousers),
-        (V3::new(-0.07, -0.08, -0.88), V3::new(0.07, 0.08, 0.0), V3::new(0.0, -0.1, 0.9), -swing, trousers),
-        (V3::new(-0.12, -0.21, 0.0), V3::new(0.12, 0.21, 0.6), V3::new(0.0, 0.0, 0.88), 0.0, shirt),
-        (V3::new(-0.05, -0.05, -0.6), V3::new(0.05, 0.05, 0.0), V3::new(0.0, 0.27, 1.45), -0.8 * swing, shirt),
-        (V3::new(-0.05, -0.05, -0.6), V3::new(0.05, 0.05, 0.0), V3::new(0.0, -0.27, 1.45), 0.8 * swing, shirt),
-        (V3::new(-0.1, -0.09, 0.0), V3::new(0.1, 0.09, 0.2), V3::new(0.0, 0.0, 1.5), 0.0, skin),
-        (V3::new(-0.11, -0.1, 0.0), V3::new(0.11, 0.1, 0.06), V3::new(0.0, 0.0, 1.69), 0.0, hair),
+        (
+            V3::new(-0.07, -0.08, -0.88),
+            V3::new(0.07, 0.08, 0.0),
+            V3::new(0.0, 0.1, 0.9),
+            swing,
+            trousers,
+        ),
+        (
+            V3::new(-0.07, -0.08, -0.88),
+            V3::new(0.07, 0.08, 0.0),
+            V3::new(0.0, -0.1, 0.9),
+            -swing,
+            trousers,
+        ),
+        (
+            V3::new(-0.12, -0.21, 0.0),
+            V3::new(0.12, 0.21, 0.6),
+            V3::new(0.0, 0.0, 0.88),
+            0.0,
+            shirt,
+        ),
+        (
+            V3::new(-0.05, -0.05, -0.6),
+            V3::new(0.05, 0.05, 0.0),
+            V3::new(0.0, 0.27, 1.45),
+            -0.8 * swing,
+            shirt,
+        ),
+        (
+            V3::new(-0.05, -0.05, -0.6),
+            V3::new(0.05, 0.05, 0.0),
+            V3::new(0.0, -0.27, 1.45),
+            0.8 * swing,
+            shirt,
+        ),
+        (
+            V3::new(-0.1, -0.09, 0.0),
+            V3::new(0.1, 0.09, 0.2),
+            V3::new(0.0, 0.0, 1.5),
+            0.0,
+            skin,
+        ),
+        (
+            V3::new(-0.11, -0.1, 0.0),
+            V3::new(0.11, 0.1, 0.06),
+            V3::new(0.0, 0.0, 1.69),
+            0.0,
+            hair,
+        ),
     ];
     for (lo, hi, pivot, angle, mat) in parts {
         let swing_rot = Rotation3::from_axis_angle(&Vector3::y_axis(), angle);
