@@ -1,1 +1,15 @@
-//! romo crate.
+//! romo: RoMo motion segmentation (Goli, Sabour et al., "RoMo: Robust Motion
+//! Segmentation Improves Structure from Motion", 2025), with classical,
+//! dependency-free backends for every stage and optional neural ones through
+//! ONNX Runtime (feature `onnx`).
+//!
+//! Stages (DESIGN.md, "The paper it implements"): [`flow`] → cycle check →
+//! robust epipolar [`geometry`] → Sampson-based U/L labels → per-pixel
+//! features → a tiny MLP → refinement to full resolution → masks.
+
+pub mod error;
+pub mod flow;
+pub mod geometry;
+pub mod plane;
+
+pub use error::{Result, RomoError};

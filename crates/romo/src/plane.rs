@@ -1,0 +1,345 @@
+//! Single-channel f32 images ("planes") and the few image operations every
+//! RoMo stage needs: bilinear sampling, resizing, pyramids, separable blur,
+//! box filters and gradients. Kept dependency-free so the flow, feature and
+//! refinement stages share one definition of border handling (clamp to edge).
+
+use rayon::prelude::*;
+
+/// A row-major single-channel f32 image.
+#[derive(Debug, Clone, PartialEq)]
+pub struct Plane {
+    /// Width in pixels.
+    pub w: usize,
+    /// Height in pixels.
+    pub h: usize,
+    /// `w * h` values, row-major.
+    pub data: Vec<f32>,
+}
+
+impl Plane {
+    /// A plane filled with `v`.
+    pub fn filled(w: usize, h: usize, v: f32) -> Self {
+        Self {
+            w,
+            h,
+            data: vec![v; w * h],
+        }
+    }
+
+    /// A plane from a function of (x, y).
+    pub fn from_fn(w: usize, h: usize, f: impl Fn(usize, usize) -> f32 + Sync) -> Self {
+        let mut data = vec![0.0; w * h];
+        data.par_chunks_mut(w.max(1))
+            .enumerate()
+            .for_each(|(y, row)| {
+                for (x, v) in row.iter_mut().enumerate() {
+                    *v = f(x, y);
+                }
+            });
+        Self { w, h, data }
+    }
+
+    /// Value at integer coordinates (must be in range).
+    #[inline]
+    pub fn at(&self, x: usize, y: usize) -> f32 {
+        self.data[y * self.w + x]
+    }
+
+    /// Value at integer coordinates clamped to the image.
+    #[inline]
+    pub fn at_clamped(&self, x: isize, y: isize) -> f32 {
+        let x = x.clamp(0, self.w as isize - 1) as usize;
+        let y = y.clamp(0, self.h as isize - 1) as usize;
+        self.data[y * self.w + x]
+    }
+
+    /// Bilinear sample at continuous pixel coordinates (pixel centres at
+    /// integers), clamped to the border.
+    #[inline]
+    pub fn bilinear(&self, x: f32, y: f32) -> f32 {
+        let xm = (self.w - 1) as f32;
+        let ym = (self.h - 1) as f32;
+        let x = x.clamp(0.0, xm);
+        let y = y.clamp(0.0, ym);
+        let x0 = x.floor();
+        let y0 = y.floor();
+        let fx = x - x0;
+        let fy = y - y0;
+        let x0 = x0 as usize;
+        let y0 = y0 as usize;
+        let x1 = (x0 + 1).min(self.w - 1);
+        let y1 = (y0 + 1).min(self.h - 1);
+        let r0 = y0 * self.w;
+        let r1 = y1 * self.w;
+        let a = self.data[r0 + x0] + fx * (self.data[r0 + x1] - self.data[r0 + x0]);
+        let b = self.data[r1 + x0] + fx * (self.data[r1 + x1] - self.data[r1 + x0]);
+        a + fy * (b - a)
+    }
+
+    /// Resize with bilinear interpolation (pixel-centre aligned). When
+    /// shrinking by more than 2×, the source is box-averaged first so the
+    /// result is not aliased.
+    pub fn resize(&self, nw: usize, nh: usize) -> Plane {
+        if nw == self.w && nh == self.h {
+            return self.clone();
+        }
+        let mut src = self.clone();
+        while src.w >= 2 * nw.max(1) * 2 && src.h >= 2 * nh.max(1) * 2 {
+            src = src.half();
+        }
+        let sx = src.w as f32 / nw as f32;
+        let sy = src.h as f32 / nh as f32;
+        Plane::from_fn(nw, nh, |x, y| {
+            src.bilinear((x as f32 + 0.5) * sx - 0.5, (y as f32 + 0.5) * sy - 0.5)
+        })
+    }
+
+    /// Half resolution by 2×2 box averaging (odd edges clamped).
+    pub fn half(&self) -> Plane {
+        let nw = self.w.div_ceil(2).max(1);
+        let nh = self.h.div_ceil(2).max(1);
+        Plane::from_fn(nw, nh, |x, y| {
+            let x0 = (2 * x) as isize;
+            let y0 = (2 * y) as isize;
+            0.25 * (self.at_clamped(x0, y0)
+                + self.at_clamped(x0 + 1, y0)
+                + self.at_clamped(x0, y0 + 1)
+                + self.at_clamped(x0 + 1, y0 + 1))
+        })
+    }
+
+    /// Separable Gaussian blur with standard deviation `sigma` pixels
+    /// (kernel radius 3σ, clamped borders). `sigma <= 0` returns a copy.
+    pub fn gaussian(&self, sigma: f32) -> Plane {
+        if sigma <= 0.0 {
+            return self.clone();
+        }
+        let r = (3.0 * sigma).ceil() as isize;
+        let mut k: Vec<f32> = (-r..=r)
+            .map(|i| (-(i * i) as f32 / (2.0 * sigma * sigma)).exp())
+            .collect();
+        let s: f32 = k.iter().sum();
+        k.iter_mut().for_each(|v| *v /= s);
+        let tmp = Plane::from_fn(self.w, self.h, |x, y| {
+            let mut acc = 0.0;
+            for (j, kv) in k.iter().enumerate() {
+                acc += kv * self.at_clamped(x as isize + j as isize - r, y as isize);
+            }
+            acc
+        });
+        Plane::from_fn(self.w, self.h, |x, y| {
+            let mut acc = 0.0;
+            for (j, kv) in k.iter().enumerate() {
+                acc += kv * tmp.at_clamped(x as isize, y as isize + j as isize - r);
+            }
+            acc
+        })
+    }
+
+    /// Mean over the (2r+1)² window around each pixel, windows clipped to the
+    /// image (the mean is over the pixels actually inside). O(1) per pixel.
+    pub fn box_mean(&self, r: usize) -> Plane {
+        let (w, h) = (self.w, self.h);
+        // Horizontal running sums.
+        let mut tmp = vec![0.0f32; w * h];
+        tmp.par_chunks_mut(w).enumerate().for_each(|(y, out)| {
+            let row = &self.data[y * w..(y + 1) * w];
+            let mut pre = vec![0.0f64; w + 1];
+            for x in 0..w {
+                pre[x + 1] = pre[x] + row[x] as f64;
+            }
+            for (x, o) in out.iter_mut().enumerate() {
+                let a = x.saturating_sub(r);
+                let b = (x + r + 1).min(w);
+                *o = ((pre[b] - pre[a]) / (b - a) as f64) as f32;
+            }
+        });
+        // Vertical running sums over columns.
+        let mut out = vec![0.0f32; w * h];
+        let cols: Vec<Vec<f32>> = (0..w)
+            .into_par_iter()
+            .map(|x| {
+                let mut pre = vec![0.0f64; h + 1];
+                for y in 0..h {
+                    pre[y + 1] = pre[y] + tmp[y * w + x] as f64;
+                }
+                (0..h)
+                    .map(|y| {
+                        let a = y.saturating_sub(r);
+                        let b = (y + r + 1).min(h);
+                        ((pre[b] - pre[a]) / (b - a) as f64) as f32
+                    })
+                    .collect()
+            })
+            .collect();
+        for (x, col) in cols.iter().enumerate() {
+            for (y, v) in col.iter().enumerate() {
+                out[y * w + x] = *v;
+            }
+        }
+        Plane { w, h, data: out }
+    }
+
+    /// Central-difference gradients (half the difference of the clamped
+    /// neighbours at the border).
+    pub fn gradients(&self) -> (Plane, Plane) {
+        let (w, h) = (self.w, self.h);
+        let mut gx = vec![0.0f32; w * h];
+        let mut gy = vec![0.0f32; w * h];
+        gx.par_chunks_mut(w)
+            .zip(gy.par_chunks_mut(w))
+            .enumerate()
+            .for_each(|(y, (rx, ry))| {
+                let row = &self.data[y * w..(y + 1) * w];
+                let up = &self.data[y.saturating_sub(1) * w..][..w];
+                let dn = &self.data[(y + 1).min(h - 1) * w..][..w];
+                for x in 0..w {
+                    let l = row[x.saturating_sub(1)];
+                    let r = row[(x + 1).min(w - 1)];
+                    rx[x] = 0.5 * (r - l);
+                    ry[x] = 0.5 * (dn[x] - up[x]);
+                }
+            });
+        (Plane { w, h, data: gx }, Plane { w, h, data: gy })
+    }
+
+    /// Bilinear sample of several planes of equal size at one point.
+    #[inline]
+    pub fn bilinear_many<const N: usize>(planes: [&Plane; N], x: f32, y: f32) -> [f32; N] {
+        let p = planes[0];
+        let x = x.clamp(0.0, (p.w - 1) as f32);
+        let y = y.clamp(0.0, (p.h - 1) as f32);
+        let (x0, y0) = (x.floor(), y.floor());
+        let (fx, fy) = (x - x0, y - y0);
+        let (x0, y0) = (x0 as usize, y0 as usize);
+        let x1 = (x0 + 1).min(p.w - 1);
+        let y1 = (y0 + 1).min(p.h - 1);
+        let (i00, i10, i01, i11) = (y0 * p.w + x0, y0 * p.w + x1, y1 * p.w + x0, y1 * p.w + x1);
+        let (w00, w10, w01, w11) = (
+            (1.0 - fx) * (1.0 - fy),
+            fx * (1.0 - fy),
+            (1.0 - fx) * fy,
+            fx * fy,
+        );
+        let mut out = [0.0; N];
+        for (o, q) in out.iter_mut().zip(planes) {
+            let d = &q.data;
+            *o = w00 * d[i00] + w10 * d[i10] + w01 * d[i01] + w11 * d[i11];
+        }
+        out
+    }
+
+    /// Element-wise map.
+    pub fn map(&self, f: impl Fn(f32) -> f32 + Sync) -> Plane {
+        Plane {
+            w: self.w,
+            h: self.h,
+            data: self.data.par_iter().map(|v| f(*v)).collect(),
+        }
+    }
+
+    /// Element-wise combination of two planes of the same size.
+    pub fn zip(&self, o: &Plane, f: impl Fn(f32, f32) -> f32 + Sync) -> Plane {
+        Plane {
+            w: self.w,
+            h: self.h,
+            data: self
+                .data
+                .par_iter()
+                .zip(o.data.par_iter())
+                .map(|(a, b)| f(*a, *b))
+                .collect(),
+        }
+    }
+}
+
+/// An RGB image as three planes (values in [0, 1]).
+#[derive(Debug, Clone)]
+pub struct Rgb {
+    /// Red, green, blue planes.
+    pub c: [Plane; 3],
+}
+
+impl Rgb {
+    /// From interleaved RGB f32 data.
+    pub fn from_interleaved(w: usize, h: usize, data: &[f32]) -> Self {
+        let ch = |k: usize| Plane::from_fn(w, h, |x, y| data[(y * w + x) * 3 + k]);
+        Rgb {
+            c: [ch(0), ch(1), ch(2)],
+        }
+    }
+
+    /// From an `image` crate f32 RGB image.
+    pub fn from_image(img: &image::Rgb32FImage) -> Self {
+        Self::from_interleaved(img.width() as usize, img.height() as usize, img.as_raw())
+    }
+
+    /// Width.
+    pub fn w(&self) -> usize {
+        self.c[0].w
+    }
+
+    /// Height.
+    pub fn h(&self) -> usize {
+        self.c[0].h
+    }
+
+    /// Rec. 601 luma in [0, 1].
+    pub fn gray(&self) -> Plane {
+        let [r, g, b] = &self.c;
+        Plane::from_fn(r.w, r.h, |x, y| {
+            0.299 * r.at(x, y) + 0.587 * g.at(x, y) + 0.114 * b.at(x, y)
+        })
+    }
+
+    /// Resize every channel.
+    pub fn resize(&self, nw: usize, nh: usize) -> Rgb {
+        Rgb {
+            c: [
+                self.c[0].resize(nw, nh),
+                self.c[1].resize(nw, nh),
+                self.c[2].resize(nw, nh),
+            ],
+        }
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    #![allow(clippy::unwrap_used, clippy::expect_used)]
+    use super::*;
+
+    #[test]
+    fn bilinear_is_exact_on_a_linear_ramp() {
+        let p = Plane::from_fn(10, 8, |x, y| 2.0 * x as f32 + 3.0 * y as f32);
+        assert!((p.bilinear(3.25, 4.5) - (6.5 + 13.5)).abs() < 1e-5);
+        // Clamped beyond the border.
+        assert_eq!(p.bilinear(-5.0, 0.0), 0.0);
+    }
+
+    #[test]
+    fn box_mean_matches_brute_force() {
+        let p = Plane::from_fn(13, 9, |x, y| ((x * 7 + y * 3) % 11) as f32);
+        let b = p.box_mean(2);
+        for y in 0..9usize {
+            for x in 0..13usize {
+                let (mut s, mut n) = (0.0, 0.0);
+                for yy in y.saturating_sub(2)..(y + 3).min(9) {
+                    for xx in x.saturating_sub(2)..(x + 3).min(13) {
+                        s += p.at(xx, yy);
+                        n += 1.0;
+                    }
+                }
+                assert!((b.at(x, y) - s / n).abs() < 1e-4, "{x},{y}");
+            }
+        }
+    }
+
+    #[test]
+    fn gradients_of_a_ramp() {
+        let p = Plane::from_fn(6, 6, |x, y| x as f32 - 2.0 * y as f32);
+        let (gx, gy) = p.gradients();
+        assert!((gx.at(3, 3) - 1.0).abs() < 1e-6);
+        assert!((gy.at(3, 3) + 2.0).abs() < 1e-6);
+    }
+}
