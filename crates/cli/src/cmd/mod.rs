@@ -1,11 +1,15 @@
 //! One module per subcommand of the CLI contract in DESIGN.md.
 
+pub mod scene;
+
 use crate::Ctx;
 use clap::Subcommand;
 
 /// Every subcommand.
 #[derive(Debug, Subcommand)]
 pub enum Command {
+    /// Built-in synthetic scenes (`scene generate scenes/X.toml --out DIR`).
+    Scene(scene::Args),
     /// Evaluate masks, poses or rendered views.
     #[command(subcommand)]
     Eval(EvalCommand),
@@ -26,6 +30,7 @@ pub enum BenchCommand {}
 pub fn dispatch(cmd: &Command, ctx: &Ctx) -> anyhow::Result<serde_json::Value> {
     let _ = ctx;
     match cmd {
+        Command::Scene(a) => scene::run(a, ctx),
         Command::Eval(e) => match *e {},
         Command::Bench(b) => match *b {},
     }
