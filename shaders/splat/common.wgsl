@@ -51,3 +51,246 @@ fn tile_count(p: ProjectedSplat, grid: vec2<u32>) -> u32 {
     }
     return (r.z - r.x) * (r.w - r.y);
 }
+
+// ---------------------------------------------------------------------------
+// Camera and render options shared by project / rasterize / backward kernels.
+// Layout mirrors `gpu::project::CameraUniforms` (160 bytes).
+struct CameraUniforms {
+    rot0: vec4<f32>,        // world-to-camera rotation rows (w unused)
+    rot1: vec4<f32>,
+    rot2: vec4<f32>,
+    trans: vec4<f32>,       // world-to-camera translation (xyz)
+    center: vec4<f32>,      // camera centre in world (xyz)
+    focal: vec4<f32>,       // fx, fy, cx, cy
+    clip: vec4<f32>,        // near, far, 1.3·tan(fovx/2), 1.3·tan(fovy/2)
+    background: vec4<f32>,  // rgb, w = low-pass dilation (px²)
+    width: u32,
+    height: u32,
+    grid_x: u32,
+    grid_y: u32,
+    n: u32,                 // number of splats
+    sh_degree: u32,         // degree used for colour (≤ stored)
+    sh_stored: u32,         // coefficients stored per channel
+    antialiased: u32,       // 1 = Mip-Splatting opacity compensation
+}
+
+const ALPHA_MAX: f32 = 0.99;
+const ALPHA_MIN: f32 = 0.00392156862745098; // 1 / 255
+const T_MIN: f32 = 0.0001;
+
+fn is_finite(x: f32) -> bool {
+    return (bitcast<u32>(x) & 0x7f800000u) != 0x7f800000u;
+}
+
+fn is_nan(x: f32) -> bool {
+    let b = bitcast<u32>(x);
+    return (b & 0x7f800000u) == 0x7f800000u && (b & 0x007fffffu) != 0u;
+}
+
+// Rust's `v.max(0.0)`: NaN gives 0 (WGSL's max leaves NaN unspecified).
+fn max0(v: f32) -> f32 {
+    if (is_nan(v)) {
+        return 0.0;
+    }
+    return max(v, 0.0);
+}
+
+fn all_finite3(v: vec3<f32>) -> bool {
+    return is_finite(v.x) && is_finite(v.y) && is_finite(v.z);
+}
+
+fn sigmoid(x: f32) -> f32 {
+    return 1.0 / (1.0 + exp(-x));
+}
+
+const SH_C0: f32 = 0.28209479177387814;
+const SH_C1: f32 = 0.4886025119029199;
+const SH_C2_0: f32 = 1.0925484305920792;
+const SH_C2_1: f32 = -1.0925484305920792;
+const SH_C2_2: f32 = 0.31539156525252005;
+const SH_C2_3: f32 = -1.0925484305920792;
+const SH_C2_4: f32 = 0.5462742152960396;
+const SH_C3_0: f32 = -0.5900435899266435;
+const SH_C3_1: f32 = 2.890611442640554;
+const SH_C3_2: f32 = -0.4570457994644658;
+const SH_C3_3: f32 = 0.3731763325901154;
+const SH_C3_4: f32 = -0.4570457994644658;
+const SH_C3_5: f32 = 1.445305721320277;
+const SH_C3_6: f32 = -0.5900435899266435;
+
+// Real SH basis (INRIA constants and signs), (degree+1)² entries, rest 0.
+fn sh_basis(degree: u32, d: vec3<f32>) -> array<f32, 16> {
+    var b: array<f32, 16>;
+    b[0] = SH_C0;
+    if (degree == 0u) { return b; }
+    let x = d.x; let y = d.y; let z = d.z;
+    b[1] = -SH_C1 * y;
+    b[2] = SH_C1 * z;
+    b[3] = -SH_C1 * x;
+    if (degree == 1u) { return b; }
+    let xx = x * x; let yy = y * y; let zz = z * z;
+    let xy = x * y; let yz = y * z; let xz = x * z;
+    b[4] = SH_C2_0 * xy;
+    b[5] = SH_C2_1 * yz;
+    b[6] = SH_C2_2 * (2.0 * zz - xx - yy);
+    b[7] = SH_C2_3 * xz;
+    b[8] = SH_C2_4 * (xx - yy);
+    if (degree == 2u) { return b; }
+    b[9] = SH_C3_0 * y * (3.0 * xx - yy);
+    b[10] = SH_C3_1 * xy * z;
+    b[11] = SH_C3_2 * y * (4.0 * zz - xx - yy);
+    b[12] = SH_C3_3 * z * (2.0 * zz - 3.0 * xx - 3.0 * yy);
+    b[13] = SH_C3_4 * x * (4.0 * zz - xx - yy);
+    b[14] = SH_C3_5 * z * (xx - yy);
+    b[15] = SH_C3_6 * x * (xx - 3.0 * yy);
+    return b;
+}
+
+// d basis_k / d(x, y, z).
+fn sh_basis_grad(degree: u32, d: vec3<f32>) -> array<vec3<f32>, 16> {
+    var g: array<vec3<f32>, 16>;
+    if (degree == 0u) { return g; }
+    let x = d.x; let y = d.y; let z = d.z;
+    g[1] = vec3<f32>(0.0, -SH_C1, 0.0);
+    g[2] = vec3<f32>(0.0, 0.0, SH_C1);
+    g[3] = vec3<f32>(-SH_C1, 0.0, 0.0);
+    if (degree == 1u) { return g; }
+    g[4] = vec3<f32>(SH_C2_0 * y, SH_C2_0 * x, 0.0);
+    g[5] = vec3<f32>(0.0, SH_C2_1 * z, SH_C2_1 * y);
+    g[6] = vec3<f32>(-2.0 * SH_C2_2 * x, -2.0 * SH_C2_2 * y, 4.0 * SH_C2_2 * z);
+    g[7] = vec3<f32>(SH_C2_3 * z, 0.0, SH_C2_3 * x);
+    g[8] = vec3<f32>(2.0 * SH_C2_4 * x, -2.0 * SH_C2_4 * y, 0.0);
+    if (degree == 2u) { return g; }
+    let xx = x * x; let yy = y * y; let zz = z * z;
+    g[9] = vec3<f32>(SH_C3_0 * 6.0 * x * y, SH_C3_0 * (3.0 * xx - 3.0 * yy), 0.0);
+    g[10] = vec3<f32>(SH_C3_1 * y * z, SH_C3_1 * x * z, SH_C3_1 * x * y);
+    g[11] = vec3<f32>(SH_C3_2 * (-2.0 * x * y), SH_C3_2 * (4.0 * zz - xx - 3.0 * yy), SH_C3_2 * (8.0 * y * z));
+    g[12] = vec3<f32>(SH_C3_3 * (-6.0 * x * z), SH_C3_3 * (-6.0 * y * z), SH_C3_3 * (6.0 * zz - 3.0 * xx - 3.0 * yy));
+    g[13] = vec3<f32>(SH_C3_4 * (4.0 * zz - 3.0 * xx - yy), SH_C3_4 * (-2.0 * x * y), SH_C3_4 * (8.0 * x * z));
+    g[14] = vec3<f32>(SH_C3_5 * 2.0 * x * z, -SH_C3_5 * 2.0 * y * z, SH_C3_5 * (xx - yy));
+    g[15] = vec3<f32>(SH_C3_6 * (3.0 * xx - 3.0 * yy), -SH_C3_6 * 6.0 * x * y, 0.0);
+    return g;
+}
+
+// Forward projection intermediates, shared by `project` and
+// `project_backward` so both follow the same math as
+// `reference::project::project_one`.
+struct ProjInter {
+    ok: bool,
+    p_cam: vec3<f32>,
+    qn: vec4<f32>,
+    qnorm: f32,
+    r0: vec3<f32>,          // rows of R(q̂)
+    r1: vec3<f32>,
+    r2: vec3<f32>,
+    scale: vec3<f32>,
+    c0: vec3<f32>,          // rows of Σ3
+    c1: vec3<f32>,
+    c2: vec3<f32>,
+    jw0: vec3<f32>,         // rows of J·W
+    jw1: vec3<f32>,
+    clamped_x: bool,
+    clamped_y: bool,
+    cov2d: vec3<f32>,       // undilated (a, b, c)
+    det: f32,               // dilated determinant
+    comp: f32,
+    sig: f32,
+    mean2d: vec2<f32>,
+    radius: f32,
+    conic: vec3<f32>,
+}
+
+// Geometry of one splat (everything but colour). `ok == false` = culled.
+fn project_geometry(m: vec3<f32>, ls: vec3<f32>, q: vec4<f32>, logit: f32, cam: CameraUniforms) -> ProjInter {
+    var it: ProjInter;
+    it.ok = false;
+    if (!(all_finite3(m) && all_finite3(ls) && all_finite3(q.xyz) && is_finite(q.w) && is_finite(logit))) {
+        return it;
+    }
+    let w0 = cam.rot0.xyz; let w1 = cam.rot1.xyz; let w2 = cam.rot2.xyz;
+    it.p_cam = vec3<f32>(dot(w0, m) + cam.trans.x, dot(w1, m) + cam.trans.y, dot(w2, m) + cam.trans.z);
+    let tx = it.p_cam.x; let ty = it.p_cam.y; let tz = it.p_cam.z;
+    if (!is_finite(tz) || tz < cam.clip.x || tz > cam.clip.y) {
+        return it;
+    }
+    let n2 = q.x * q.x + q.y * q.y + q.z * q.z + q.w * q.w;
+    if (!(n2 > 0.0) || !is_finite(n2)) {
+        return it;
+    }
+    it.qnorm = sqrt(n2);
+    it.qn = q / it.qnorm;
+    let qw = it.qn.x; let qx = it.qn.y; let qy = it.qn.z; let qz = it.qn.w;
+    it.r0 = vec3<f32>(1.0 - 2.0 * (qy * qy + qz * qz), 2.0 * (qx * qy - qw * qz), 2.0 * (qx * qz + qw * qy));
+    it.r1 = vec3<f32>(2.0 * (qx * qy + qw * qz), 1.0 - 2.0 * (qx * qx + qz * qz), 2.0 * (qy * qz - qw * qx));
+    it.r2 = vec3<f32>(2.0 * (qx * qz - qw * qy), 2.0 * (qy * qz + qw * qx), 1.0 - 2.0 * (qx * qx + qy * qy));
+    it.scale = exp(ls);
+    let m0 = it.r0 * it.scale; let m1 = it.r1 * it.scale; let m2 = it.r2 * it.scale;
+    it.c0 = vec3<f32>(dot(m0, m0), dot(m0, m1), dot(m0, m2));
+    it.c1 = vec3<f32>(dot(m1, m0), dot(m1, m1), dot(m1, m2));
+    it.c2 = vec3<f32>(dot(m2, m0), dot(m2, m1), dot(m2, m2));
+    let xz = tx / tz; let yz = ty / tz;
+    let cx_ = min(max(xz, -cam.clip.z), cam.clip.z);
+    let cy_ = min(max(yz, -cam.clip.w), cam.clip.w);
+    it.clamped_x = cx_ != xz;
+    it.clamped_y = cy_ != yz;
+    let fx = cam.focal.x; let fy = cam.focal.y;
+    let j00 = fx / tz; let j02 = -fx * cx_ / tz;
+    let j11 = fy / tz; let j12 = -fy * cy_ / tz;
+    it.jw0 = j00 * w0 + j02 * w2;
+    it.jw1 = j11 * w1 + j12 * w2;
+    let t0 = it.jw0.x * it.c0 + it.jw0.y * it.c1 + it.jw0.z * it.c2;
+    let t1 = it.jw1.x * it.c0 + it.jw1.y * it.c1 + it.jw1.z * it.c2;
+    it.cov2d = vec3<f32>(dot(t0, it.jw0), dot(t0, it.jw1), dot(t1, it.jw1));
+    let lp = cam.background.w;
+    let a = it.cov2d.x + lp; let b = it.cov2d.y; let c = it.cov2d.z + lp;
+    it.det = a * c - b * b;
+    if (!(it.det > 0.0) || !is_finite(it.det)) {
+        return it;
+    }
+    it.conic = vec3<f32>(c / it.det, -b / it.det, a / it.det);
+    let mid = 0.5 * (a + c);
+    let lambda = mid + sqrt(max(mid * mid - it.det, 0.1));
+    it.radius = ceil(3.0 * sqrt(lambda));
+    it.mean2d = vec2<f32>(fx * xz + cam.focal.z, fy * yz + cam.focal.w);
+    let w = f32(cam.width); let h = f32(cam.height);
+    if (!(it.radius > 0.0) || it.mean2d.x + it.radius <= 0.0 || it.mean2d.x - it.radius >= w
+        || it.mean2d.y + it.radius <= 0.0 || it.mean2d.y - it.radius >= h) {
+        return it;
+    }
+    it.comp = 1.0;
+    if (cam.antialiased != 0u) {
+        let det0 = it.cov2d.x * it.cov2d.z - it.cov2d.y * it.cov2d.y;
+        it.comp = sqrt(max(det0 / it.det, 0.0));
+    }
+    it.sig = sigmoid(logit);
+    it.ok = is_finite(it.mean2d.x) && is_finite(it.mean2d.y) && all_finite3(it.conic)
+        && is_finite(it.radius) && is_finite(it.sig * it.comp);
+    return it;
+}
+
+// Unit view direction from the camera centre and its length (dir = +z when 0).
+fn view_dir(m: vec3<f32>, cam: CameraUniforms) -> vec4<f32> {
+    let d = m - cam.center.xyz;
+    let dist = sqrt(dot(d, d));
+    if (dist > 0.0) {
+        return vec4<f32>(d / dist, dist);
+    }
+    return vec4<f32>(0.0, 0.0, 1.0, 0.0);
+}
+
+// Gaussian falloff at a pixel centre: (alpha, G, dx, dy); alpha < 0 = skip.
+// Mirrors `reference::rasterize::alpha_at`.
+fn alpha_at(mean: vec2<f32>, conic: vec3<f32>, opacity: f32, px: f32, py: f32) -> vec4<f32> {
+    let dx = mean.x - px;
+    let dy = mean.y - py;
+    let power = -0.5 * (conic.x * dx * dx + conic.z * dy * dy) - conic.y * dx * dy;
+    if (power > 0.0) {
+        return vec4<f32>(-1.0, 0.0, dx, dy);
+    }
+    let g = exp(power);
+    let alpha = min(opacity * g, ALPHA_MAX);
+    if (alpha < ALPHA_MIN) {
+        return vec4<f32>(-1.0, g, dx, dy);
+    }
+    return vec4<f32>(alpha, g, dx, dy);
+}

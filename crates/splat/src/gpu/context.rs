@@ -72,13 +72,15 @@ impl GpuContext {
             required |= wgpu::Features::TIMESTAMP_QUERY;
         }
         let adapter_limits = adapter.limits();
-        let mut limits = wgpu::Limits::default();
-        limits.max_storage_buffers_per_shader_stage =
-            adapter_limits.max_storage_buffers_per_shader_stage.min(16);
-        limits.max_storage_buffer_binding_size = adapter_limits.max_storage_buffer_binding_size;
-        limits.max_buffer_size = adapter_limits.max_buffer_size;
-        limits.max_compute_workgroup_storage_size =
-            adapter_limits.max_compute_workgroup_storage_size;
+        let limits = wgpu::Limits {
+            max_storage_buffers_per_shader_stage: adapter_limits
+                .max_storage_buffers_per_shader_stage
+                .min(16),
+            max_storage_buffer_binding_size: adapter_limits.max_storage_buffer_binding_size,
+            max_buffer_size: adapter_limits.max_buffer_size,
+            max_compute_workgroup_storage_size: adapter_limits.max_compute_workgroup_storage_size,
+            ..wgpu::Limits::default()
+        };
         let (device, queue) = pollster::block_on(adapter.request_device(&wgpu::DeviceDescriptor {
             label: Some("romosplat"),
             required_features: required,
@@ -172,11 +174,23 @@ impl GpuContext {
     /// Copy the first `count` elements of `buffer` back to the host.
     /// Submits and waits for all queued work first.
     pub fn read<T: Pod>(&self, buffer: &wgpu::Buffer, count: usize) -> Result<Vec<T>, GpuError> {
-        let bytes = (count * std::mem::size_of::<T>()) as u64;
+        self.read_at(buffer, 0, count)
+    }
+
+    /// Copy `count` elements starting at element `first` back to the host.
+    pub fn read_at<T: Pod>(
+        &self,
+        buffer: &wgpu::Buffer,
+        first: usize,
+        count: usize,
+    ) -> Result<Vec<T>, GpuError> {
+        let size = std::mem::size_of::<T>();
+        let bytes = (count * size) as u64;
+        let offset = (first * size) as u64;
         if bytes == 0 {
             return Ok(Vec::new());
         }
-        if bytes > buffer.size() {
+        if !offset.is_multiple_of(4) || offset + bytes.next_multiple_of(4) > buffer.size() {
             return Err(GpuError::InvalidInput(format!(
                 "readback of {bytes} bytes from a {}-byte buffer",
                 buffer.size()
@@ -194,7 +208,7 @@ impl GpuContext {
             .create_command_encoder(&wgpu::CommandEncoderDescriptor {
                 label: Some("readback"),
             });
-        enc.copy_buffer_to_buffer(buffer, 0, &staging, 0, padded);
+        enc.copy_buffer_to_buffer(buffer, offset, &staging, 0, padded);
         self.queue.submit([enc.finish()]);
         let slice = staging.slice(..);
         let (tx, rx) = std::sync::mpsc::channel();

@@ -10,9 +10,12 @@
 
 pub mod context;
 pub mod emit_keys;
+pub mod forward;
 pub mod kernel;
 pub mod prefix_sum;
+pub mod project;
 pub mod radix_sort;
+pub mod rasterize;
 pub mod tile_ranges;
 
 #[cfg(test)]

@@ -3,7 +3,9 @@
 #![allow(clippy::unwrap_used, clippy::expect_used)]
 
 mod binning;
+mod forward;
 mod reflection;
+mod scenes;
 
 use super::{GpuContext, GpuError, GpuOptions};
 use std::sync::OnceLock;
@@ -32,6 +34,7 @@ pub(crate) fn ctx() -> Option<&'static GpuContext> {
 }
 
 /// Shared context forced onto the compare-and-swap atomics path.
+#[allow(dead_code)]
 pub(crate) fn ctx_cas() -> Option<&'static GpuContext> {
     static C: OnceLock<Option<GpuContext>> = OnceLock::new();
     C.get_or_init(|| {

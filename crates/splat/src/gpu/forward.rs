@@ -1,0 +1,282 @@
+//! The GPU forward render: project → depth keys → depth sort → tile counts in
+//! depth order → scan → emit (tile, splat) keys → stable tile sort → tile
+//! ranges → rasterize. This is Brush's WGSL-era ordering (sort splats by depth
+//! once, then a short stable sort on tile bits), which leaves each tile's list
+//! sorted by (depth, splat index) exactly as `reference::rasterize::bin`.
+//!
+//! One readback per render: the number of (tile, splat) intersections, to size
+//! the key buffers.
+
+use super::emit_keys::{BinUniforms, EmitArgs, EmitKeys};
+use super::kernel::Recorder;
+use super::prefix_sum::{PrefixSum, ScanArgs};
+use super::project::{CameraUniforms, ParamBuffers, Project, ProjectArgs};
+use super::radix_sort::{RadixSort, SortArgs, bits_for};
+use super::rasterize::{RasterArgs, Rasterize};
+use super::tile_ranges::{RangeArgs, TileRanges};
+use super::{GpuContext, GpuError};
+use crate::types::{ProjectedSplat, RasterOutput, RenderCamera, RenderOptions, Splats};
+
+/// Per-dispatch `(entry point, milliseconds)` from timestamp queries.
+pub type Timings = Vec<(&'static str, f64)>;
+
+/// Every forward kernel, compiled once.
+pub struct ForwardKernels {
+    pub project: Project,
+    pub emit: EmitKeys,
+    pub scan: PrefixSum,
+    pub sort: RadixSort,
+    pub ranges: TileRanges,
+    pub rasterize: Rasterize,
+}
+
+impl ForwardKernels {
+    pub fn new(ctx: &GpuContext) -> Self {
+        ForwardKernels {
+            project: Project::new(ctx),
+            emit: EmitKeys::new(ctx),
+            scan: PrefixSum::new(ctx),
+            sort: RadixSort::new(ctx),
+            ranges: TileRanges::new(ctx),
+            rasterize: Rasterize::new(ctx),
+        }
+    }
+}
+
+/// GPU buffers of one forward render, kept for the backward pass.
+pub struct ForwardState {
+    pub cam: wgpu::Buffer,
+    pub cam_u: CameraUniforms,
+    pub projected: wgpu::Buffer,
+    pub tile_values: wgpu::Buffer,
+    pub ranges: wgpu::Buffer,
+    pub image: wgpu::Buffer,
+    pub final_t: wgpu::Buffer,
+    pub last_contrib: wgpu::Buffer,
+    /// Number of (tile, splat) pairs.
+    pub intersections: u32,
+    pub width: u32,
+    pub height: u32,
+    pub grid: (u32, u32),
+    pub n: u32,
+}
+
+/// Upload a [`Splats`] into fresh parameter buffers (checked first).
+pub fn upload_splats(ctx: &GpuContext, s: &Splats) -> Result<ParamBuffers, GpuError> {
+    crate::error::check_splats(s).map_err(|e| GpuError::InvalidInput(e.to_string()))?;
+    let n = u32::try_from(s.len())
+        .map_err(|_| GpuError::InvalidInput(format!("{} splats", s.len())))?;
+    let max = ctx.max_binding_bytes();
+    if s.sh.len() as u64 * 4 > max || s.len() as u64 * 48 > max {
+        return Err(GpuError::InvalidInput(format!(
+            "{} splats exceed the device's {max}-byte storage binding limit",
+            s.len()
+        )));
+    }
+    Ok(ParamBuffers {
+        means: ctx.upload("means", &s.means),
+        log_scales: ctx.upload("log_scales", &s.log_scales),
+        rotations: ctx.upload("rotations", &s.rotations),
+        opacity_logits: ctx.upload("opacity_logits", &s.opacity_logits),
+        sh: ctx.upload("sh", &s.sh),
+        n,
+        sh_degree: s.sh_degree,
+    })
+}
+
+/// Record and run the forward render of resident parameters. Returns the
+/// state (for backward) and, with `profile`, per-dispatch timings.
+pub fn forward(
+    ctx: &GpuContext,
+    k: &ForwardKernels,
+    params: &ParamBuffers,
+    cam: &RenderCamera,
+    opts: &RenderOptions,
+    profile: bool,
+) -> Result<(ForwardState, Timings), GpuError> {
+    crate::error::check_camera(cam).map_err(|e| GpuError::InvalidInput(e.to_string()))?;
+    let low_pass_ok = opts.low_pass.is_finite() && opts.low_pass >= 0.0;
+    if !low_pass_ok || !opts.background.iter().all(|v| v.is_finite()) {
+        return Err(GpuError::InvalidInput(format!(
+            "render options low_pass {} background {:?} must be finite (low_pass ≥ 0)",
+            opts.low_pass, opts.background
+        )));
+    }
+    let n = params.n;
+    let grid = cam.tile_grid();
+    let num_tiles = grid.0 * grid.1;
+    let pixels = cam.width as u64 * cam.height as u64;
+    if pixels * 12 > ctx.max_binding_bytes() {
+        return Err(GpuError::InvalidInput(format!(
+            "{}x{} image is too large",
+            cam.width, cam.height
+        )));
+    }
+    let cam_u = CameraUniforms::new(cam, opts, n, params.sh_degree);
+    let cam_buf = ctx.uniform("camera", &cam_u);
+    let projected = ctx.storage("projected", n as u64 * 48);
+    let depth_keys = ctx.storage("depth_keys", n as u64 * 4);
+    let order = ctx.storage("order", n as u64 * 4);
+    let counts = ctx.storage("tile_counts", n as u64 * 4);
+    let offsets = ctx.storage("tile_offsets", (n as u64 + 1) * 4);
+    let bin_u = ctx.uniform(
+        "bin_u",
+        &BinUniforms {
+            n,
+            grid_x: grid.0,
+            grid_y: grid.1,
+            pad: 0,
+        },
+    );
+    let ranges = ctx.storage("ranges", num_tiles as u64 * 8);
+    let mut timings = Vec::new();
+
+    let mut rec = Recorder::new(ctx, profile);
+    k.project.dispatch(
+        ctx,
+        &mut rec,
+        &ProjectArgs {
+            cam: &cam_buf,
+            params,
+            projected: &projected,
+        },
+    )?;
+    // Placeholders for the key buffers in the first recording (not written there).
+    let dummy = ctx.storage("dummy", 16);
+    let first = EmitArgs {
+        uniforms: &bin_u,
+        projected: &projected,
+        depth_keys: &depth_keys,
+        order: &order,
+        counts: &counts,
+        offsets: &offsets,
+        tile_keys: &dummy,
+        tile_values: &dummy,
+        n,
+    };
+    if n > 0 {
+        k.emit.dispatch(ctx, &mut rec, "depth_keys", &first)?;
+        k.sort.dispatch(
+            ctx,
+            &k.scan,
+            &mut rec,
+            &SortArgs {
+                keys: &depth_keys,
+                values: &order,
+                n,
+                bits: 32,
+            },
+        )?;
+        k.emit.dispatch(ctx, &mut rec, "gather_counts", &first)?;
+    }
+    k.scan.dispatch(
+        ctx,
+        &mut rec,
+        &ScanArgs {
+            input: &counts,
+            output: &offsets,
+            n,
+        },
+    )?;
+    timings.extend(rec.finish()?);
+    let total: u64 = ctx.read_at::<u32>(&offsets, n as usize, 1)?[0] as u64;
+    if total * 4 > ctx.max_binding_bytes() {
+        return Err(GpuError::InvalidInput(format!(
+            "{total} tile intersections exceed the device's storage binding limit"
+        )));
+    }
+    let total = total as u32;
+    let tile_keys = ctx.storage("tile_keys", total as u64 * 4);
+    let tile_values = ctx.storage("tile_values", total as u64 * 4);
+    let image = ctx.storage("image", pixels * 12);
+    let final_t = ctx.storage("final_t", pixels * 4);
+    let last_contrib = ctx.storage("last_contrib", pixels * 4);
+
+    let mut rec = Recorder::new(ctx, profile);
+    if total > 0 {
+        let second = EmitArgs {
+            tile_keys: &tile_keys,
+            tile_values: &tile_values,
+            ..first
+        };
+        k.emit.dispatch(ctx, &mut rec, "emit", &second)?;
+        let bits = bits_for(num_tiles.saturating_sub(1));
+        k.sort.dispatch(
+            ctx,
+            &k.scan,
+            &mut rec,
+            &SortArgs {
+                keys: &tile_keys,
+                values: &tile_values,
+                n: total,
+                bits,
+            },
+        )?;
+    }
+    k.ranges.dispatch(
+        ctx,
+        &mut rec,
+        &RangeArgs {
+            tile_keys: &tile_keys,
+            ranges: &ranges,
+            n: total,
+            num_tiles,
+        },
+    )?;
+    k.rasterize.dispatch(
+        ctx,
+        &mut rec,
+        &RasterArgs {
+            cam: &cam_buf,
+            projected: &projected,
+            tile_values: &tile_values,
+            ranges: &ranges,
+            image: &image,
+            final_t: &final_t,
+            last_contrib: &last_contrib,
+            grid,
+        },
+    )?;
+    timings.extend(rec.finish()?);
+    Ok((
+        ForwardState {
+            cam: cam_buf,
+            cam_u,
+            projected,
+            tile_values,
+            ranges,
+            image,
+            final_t,
+            last_contrib,
+            intersections: total,
+            width: cam.width,
+            height: cam.height,
+            grid,
+            n,
+        },
+        timings,
+    ))
+}
+
+impl ForwardState {
+    /// Read the projected splats back.
+    pub fn read_projected(&self, ctx: &GpuContext) -> Result<Vec<ProjectedSplat>, GpuError> {
+        ctx.read(&self.projected, self.n as usize)
+    }
+
+    /// Read everything back in the reference's [`RasterOutput`] layout.
+    pub fn read_raster(&self, ctx: &GpuContext) -> Result<RasterOutput, GpuError> {
+        let px = self.width as usize * self.height as usize;
+        let tiles = (self.grid.0 * self.grid.1) as usize;
+        let r: Vec<u32> = ctx.read(&self.ranges, tiles * 2)?;
+        Ok(RasterOutput {
+            width: self.width,
+            height: self.height,
+            image: ctx.read(&self.image, px * 3)?,
+            final_transmittance: ctx.read(&self.final_t, px)?,
+            last_contrib: ctx.read(&self.last_contrib, px)?,
+            tile_ranges: r.chunks_exact(2).map(|c| [c[0], c[1]]).collect(),
+            tile_splats: ctx.read(&self.tile_values, self.intersections as usize)?,
+        })
+    }
+}
