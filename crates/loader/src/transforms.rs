@@ -1,0 +1,525 @@
+//! transforms.json in the nerfstudio and instant-ngp variants: global or
+//! per-frame intrinsics (`fl_x fl_y cx cy w h`), `camera_angle_x` only (NeRF
+//! synthetic), OpenCV distortion `k1 k2 p1 p2` (→ COLMAP `OPENCV`), fisheye
+//! `k1..k4` (→ `OPENCV_FISHEYE`), `aabb_scale`, and `file_path`s with or
+//! without an extension.
+//!
+//! Poses there are camera-to-world with OpenGL camera axes (x right, y up,
+//! z backward). This module is the ONE place that converts them to COLMAP's
+//! world-to-camera with OpenCV axes: `c2w_cv = c2w_gl · diag(1, -1, -1, 1)`,
+//! `w2c = c2w_cv⁻¹`. The world frame itself is left unchanged.
+
+use crate::camera::{Camera, CameraModel, Pose};
+use crate::colmap::ColmapModel;
+use crate::error::{LoaderError, Result};
+use crate::io::{read_string, write_atomic};
+use nalgebra::{Matrix3, Matrix4, Vector3};
+use serde::{Deserialize, Serialize};
+use std::io::Write;
+use std::path::{Path, PathBuf};
+
+/// Intrinsics fields that may appear globally or per frame. Missing per-frame
+/// fields fall back to the global ones.
+#[derive(Debug, Clone, Default, PartialEq, Serialize, Deserialize)]
+pub struct IntrinsicFields {
+    #[serde(skip_serializing_if = "Option::is_none")]
+    pub camera_model: Option<String>,
+    #[serde(skip_serializing_if = "Option::is_none")]
+    pub camera_angle_x: Option<f64>,
+    #[serde(skip_serializing_if = "Option::is_none")]
+    pub camera_angle_y: Option<f64>,
+    #[serde(skip_serializing_if = "Option::is_none")]
+    pub fl_x: Option<f64>,
+    #[serde(skip_serializing_if = "Option::is_none")]
+    pub fl_y: Option<f64>,
+    #[serde(skip_serializing_if = "Option::is_none")]
+    pub cx: Option<f64>,
+    #[serde(skip_serializing_if = "Option::is_none")]
+    pub cy: Option<f64>,
+    #[serde(skip_serializing_if = "Option::is_none")]
+    pub w: Option<f64>,
+    #[serde(skip_serializing_if = "Option::is_none")]
+    pub h: Option<f64>,
+    #[serde(skip_serializing_if = "Option::is_none")]
+    pub k1: Option<f64>,
+    #[serde(skip_serializing_if = "Option::is_none")]
+    pub k2: Option<f64>,
+    #[serde(skip_serializing_if = "Option::is_none")]
+    pub k3: Option<f64>,
+    #[serde(skip_serializing_if = "Option::is_none")]
+    pub k4: Option<f64>,
+    #[serde(skip_serializing_if = "Option::is_none")]
+    pub p1: Option<f64>,
+    #[serde(skip_serializing_if = "Option::is_none")]
+    pub p2: Option<f64>,
+}
+
+impl IntrinsicFields {
+    /// Field-wise `self` or else `global`.
+    fn or(&self, g: &IntrinsicFields) -> IntrinsicFields {
+        IntrinsicFields {
+            camera_model: self.camera_model.clone().or_else(|| g.camera_model.clone()),
+            camera_angle_x: self.camera_angle_x.or(g.camera_angle_x),
+            camera_angle_y: self.camera_angle_y.or(g.camera_angle_y),
+            fl_x: self.fl_x.or(g.fl_x),
+            fl_y: self.fl_y.or(g.fl_y),
+            cx: self.cx.or(g.cx),
+            cy: self.cy.or(g.cy),
+            w: self.w.or(g.w),
+            h: self.h.or(g.h),
+            k1: self.k1.or(g.k1),
+            k2: self.k2.or(g.k2),
+            k3: self.k3.or(g.k3),
+            k4: self.k4.or(g.k4),
+            p1: self.p1.or(g.p1),
+            p2: self.p2.or(g.p2),
+        }
+    }
+
+    /// The fields describing `cam` (errors for models transforms.json cannot hold).
+    pub fn from_camera(cam: &Camera) -> std::result::Result<Self, String> {
+        let (fx, fy) = cam.focal();
+        let (cx, cy) = cam.principal_point();
+        let d = cam.distortion();
+        let mut f = IntrinsicFields {
+            fl_x: Some(fx),
+            fl_y: Some(fy),
+            cx: Some(cx),
+            cy: Some(cy),
+            w: Some(cam.width as f64),
+            h: Some(cam.height as f64),
+            camera_angle_x: Some(2.0 * (cam.width as f64 / (2.0 * fx)).atan()),
+            camera_angle_y: Some(2.0 * (cam.height as f64 / (2.0 * fy)).atan()),
+            ..Default::default()
+        };
+        match cam.model {
+            CameraModel::SIMPLE_PINHOLE | CameraModel::PINHOLE => {
+                f.camera_model = Some("OPENCV".into());
+            }
+            CameraModel::SIMPLE_RADIAL | CameraModel::RADIAL | CameraModel::OPENCV => {
+                f.camera_model = Some("OPENCV".into());
+                f.k1 = d.first().copied();
+                f.k2 = Some(d.get(1).copied().unwrap_or(0.0));
+                f.p1 = Some(d.get(2).copied().unwrap_or(0.0));
+                f.p2 = Some(d.get(3).copied().unwrap_or(0.0));
+            }
+            CameraModel::OPENCV_FISHEYE => {
+                f.camera_model = Some("OPENCV_FISHEYE".into());
+                f.k1 = d.first().copied();
+                f.k2 = d.get(1).copied();
+                f.k3 = d.get(2).copied();
+                f.k4 = d.get(3).copied();
+            }
+            m => {
+                return Err(format!(
+                    "camera {}: model {} cannot be stored in transforms.json",
+                    cam.id,
+                    m.name()
+                ));
+            }
+        }
+        Ok(f)
+    }
+}
+
+/// One entry of `frames`.
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+pub struct TransformsFrame {
+    /// Image path relative to the transforms.json folder, extension optional.
+    pub file_path: String,
+    /// Camera-to-world, OpenGL axes, row-major 4×4 (3×4 accepted on read).
+    pub transform_matrix: Vec<Vec<f64>>,
+    /// Per-frame intrinsics overriding the global ones.
+    #[serde(flatten)]
+    pub intrinsics: IntrinsicFields,
+    /// Any other keys (`sharpness`, `mask_path`, ...), kept on round trip.
+    #[serde(flatten)]
+    pub extra: serde_json::Map<String, serde_json::Value>,
+}
+
+/// A whole transforms.json.
+#[derive(Debug, Clone, Default, PartialEq, Serialize, Deserialize)]
+pub struct Transforms {
+    /// Global intrinsics.
+    #[serde(flatten)]
+    pub intrinsics: IntrinsicFields,
+    /// instant-ngp scene bounding box scale (a power of two).
+    #[serde(skip_serializing_if = "Option::is_none")]
+    pub aabb_scale: Option<f64>,
+    pub frames: Vec<TransformsFrame>,
+    /// Any other top-level keys, kept on round trip.
+    #[serde(flatten)]
+    pub extra: serde_json::Map<String, serde_json::Value>,
+}
+
+/// A frame with its image resolved on disk and its camera in COLMAP terms.
+#[derive(Debug, Clone, PartialEq)]
+pub struct ResolvedFrame {
+    /// The image file found for `file_path`.
+    pub image_path: PathBuf,
+    /// Its file name (the key used by masks, COLMAP and split.json).
+    pub name: String,
+    /// Intrinsics as a COLMAP camera (`PINHOLE`, `OPENCV` or `OPENCV_FISHEYE`), id 0.
+    pub camera: Camera,
+    /// World-to-camera pose, OpenCV axes.
+    pub pose: Pose,
+}
+
+const EXTENSIONS: [&str; 6] = ["png", "jpg", "jpeg", "PNG", "JPG", "JPEG"];
+
+/// `diag(1, -1, -1)`: flips camera y and z between OpenGL and OpenCV axes.
+fn flip() -> Matrix3<f64> {
+    Matrix3::from_diagonal(&Vector3::new(1.0, -1.0, -1.0))
+}
+
+/// OpenGL camera-to-world → COLMAP world-to-camera (OpenCV axes).
+pub fn pose_from_c2w_opengl(c2w: &Matrix4<f64>) -> Pose {
+    let r_c2w = c2w.fixed_view::<3, 3>(0, 0).into_owned() * flip();
+    let c = c2w.fixed_view::<3, 1>(0, 3).into_owned();
+    let r = r_c2w.transpose();
+    Pose::from_rt(&r, &(-(r * c)))
+}
+
+/// COLMAP world-to-camera → OpenGL camera-to-world.
+pub fn c2w_opengl_from_pose(pose: &Pose) -> Matrix4<f64> {
+    let mut m = pose.camera_to_world();
+    let r = m.fixed_view::<3, 3>(0, 0).into_owned() * flip();
+    m.fixed_view_mut::<3, 3>(0, 0).copy_from(&r);
+    m
+}
+
+fn matrix_from_rows(path: &Path, idx: usize, rows: &[Vec<f64>]) -> Result<Matrix4<f64>> {
+    if !(rows.len() == 3 || rows.len() == 4) || rows.iter().take(3).any(|r| r.len() != 4) {
+        return Err(LoaderError::format(
+            path,
+            format!("frame {idx}: transform_matrix must be 4x4 or 3x4"),
+        ));
+    }
+    let mut m = Matrix4::identity();
+    for (i, r) in rows.iter().take(3).enumerate() {
+        for (j, v) in r.iter().enumerate() {
+            if !v.is_finite() {
+                return Err(LoaderError::format(
+                    path,
+                    format!("frame {idx}: transform_matrix has {v}"),
+                ));
+            }
+            m[(i, j)] = *v;
+        }
+    }
+    Ok(m)
+}
+
+/// Read and parse a transforms.json (no file checks; see [`Transforms::resolve`]).
+pub fn read_transforms(path: impl AsRef<Path>) -> Result<Transforms> {
+    let path = path.as_ref();
+    let text = read_string(path)?;
+    serde_json::from_str(&text)
+        .map_err(|e| LoaderError::format(path, format!("invalid transforms.json: {e}")))
+}
+
+/// Write a transforms.json atomically (pretty-printed).
+pub fn write_transforms(path: impl AsRef<Path>, t: &Transforms) -> Result<()> {
+    let path = path.as_ref();
+    let text =
+        serde_json::to_string_pretty(t).map_err(|e| LoaderError::format(path, e.to_string()))?;
+    write_atomic(path, |w: &mut dyn Write| {
+        w.write_all(text.as_bytes())
+            .map_err(|e| LoaderError::io(path, e))
+    })
+}
+
+/// Find the image for a `file_path`: as given, else with each common
+/// extension appended (instant-ngp / NeRF synthetic omit it).
+pub fn resolve_image_path(base: &Path, file_path: &str) -> Option<PathBuf> {
+    let p = base.join(file_path);
+    if p.is_file() {
+        return Some(p);
+    }
+    EXTENSIONS
+        .iter()
+        .map(|e| base.join(format!("{file_path}.{e}")))
+        .find(|c| c.is_file())
+}
+
+impl Transforms {
+    /// Build from COLMAP cameras and poses. `entries` are (file_path, camera,
+    /// pose). Intrinsics are global when every camera is equal, else per frame.
+    pub fn from_cameras(entries: &[(String, Camera, Pose)]) -> std::result::Result<Self, String> {
+        let shared = entries.windows(2).all(|w| {
+            let (a, b) = (&w[0].1, &w[1].1);
+            a.model == b.model && a.width == b.width && a.height == b.height && a.params == b.params
+        });
+        let mut t = Transforms::default();
+        if shared && let Some((_, cam, _)) = entries.first() {
+            t.intrinsics = IntrinsicFields::from_camera(cam)?;
+        }
+        for (file_path, cam, pose) in entries {
+            let m = c2w_opengl_from_pose(pose);
+            t.frames.push(TransformsFrame {
+                file_path: file_path.clone(),
+                transform_matrix: (0..4)
+                    .map(|i| (0..4).map(|j| m[(i, j)]).collect())
+                    .collect(),
+                intrinsics: if shared {
+                    IntrinsicFields::default()
+                } else {
+                    IntrinsicFields::from_camera(cam)?
+                },
+                extra: Default::default(),
+            });
+        }
+        Ok(t)
+    }
+
+    /// Build from a COLMAP model, images in name order, paths `{prefix}{name}`
+    /// (use `"images/"` for a scene folder).
+    pub fn from_model(model: &ColmapModel, prefix: &str) -> std::result::Result<Self, String> {
+        let mut entries = Vec::new();
+        for im in model.images_by_name() {
+            let cam = model
+                .cameras
+                .get(&im.camera_id)
+                .ok_or(format!("image {} has no camera", im.name))?;
+            entries.push((format!("{prefix}{}", im.name), cam.clone(), im.pose));
+        }
+        Self::from_cameras(&entries)
+    }
+
+    /// Resolve every frame: find its image under `base` (the transforms.json
+    /// folder; `path` names the file in errors), build its camera, convert
+    /// its pose. Missing `w`/`h` are read from the image header.
+    pub fn resolve(&self, path: &Path, base: &Path) -> Result<Vec<ResolvedFrame>> {
+        let mut out = Vec::with_capacity(self.frames.len());
+        for (idx, f) in self.frames.iter().enumerate() {
+            let image_path =
+                resolve_image_path(base, &f.file_path).ok_or_else(|| LoaderError::Missing {
+                    path: base.join(&f.file_path),
+                    context: format!("image listed in {}", path.display()),
+                })?;
+            let name = image_path
+                .file_name()
+                .map(|s| s.to_string_lossy().into_owned())
+                .unwrap_or_default();
+            let fields = f.intrinsics.or(&self.intrinsics);
+            let camera = camera_from_fields(path, idx, &fields, &image_path)?;
+            let pose = pose_from_c2w_opengl(&matrix_from_rows(path, idx, &f.transform_matrix)?);
+            out.push(ResolvedFrame {
+                image_path,
+                name,
+                camera,
+                pose,
+            });
+        }
+        Ok(out)
+    }
+}
+
+fn camera_from_fields(
+    path: &Path,
+    idx: usize,
+    f: &IntrinsicFields,
+    image: &Path,
+) -> Result<Camera> {
+    let (w, h) = match (f.w, f.h) {
+        (Some(w), Some(h)) => (w, h),
+        _ => {
+            let (w, h) =
+                image::image_dimensions(image).map_err(|e| LoaderError::image(image, e))?;
+            (f.w.unwrap_or(w as f64), f.h.unwrap_or(h as f64))
+        }
+    };
+    if !(w >= 1.0 && h >= 1.0) {
+        return Err(LoaderError::format(
+            path,
+            format!("frame {idx}: bad image size {w}x{h}"),
+        ));
+    }
+    let from_angle = |a: Option<f64>, size: f64| a.map(|a| 0.5 * size / (0.5 * a).tan());
+    let fx = f.fl_x.or_else(|| from_angle(f.camera_angle_x, w));
+    let fy = f.fl_y.or_else(|| from_angle(f.camera_angle_y, h));
+    let (fx, fy) = match (fx, fy) {
+        (Some(x), Some(y)) => (x, y),
+        (Some(x), None) => (x, x),
+        (None, Some(y)) => (y, y),
+        (None, None) => {
+            return Err(LoaderError::format(
+                path,
+                format!("frame {idx}: no focal length (fl_x or camera_angle_x)"),
+            ));
+        }
+    };
+    let (cx, cy) = (f.cx.unwrap_or(w / 2.0), f.cy.unwrap_or(h / 2.0));
+    let z = |v: Option<f64>| v.unwrap_or(0.0);
+    let fisheye = f.camera_model.as_deref() == Some("OPENCV_FISHEYE");
+    let (model, params) = if fisheye {
+        (
+            CameraModel::OPENCV_FISHEYE,
+            vec![fx, fy, cx, cy, z(f.k1), z(f.k2), z(f.k3), z(f.k4)],
+        )
+    } else if [f.k1, f.k2, f.p1, f.p2].iter().any(|v| z(*v) != 0.0) {
+        (
+            CameraModel::OPENCV,
+            vec![fx, fy, cx, cy, z(f.k1), z(f.k2), z(f.p1), z(f.p2)],
+        )
+    } else {
+        (CameraModel::PINHOLE, vec![fx, fy, cx, cy])
+    };
+    if params.iter().any(|v| !v.is_finite()) || fx <= 0.0 || fy <= 0.0 {
+        return Err(LoaderError::format(
+            path,
+            format!("frame {idx}: invalid intrinsics {params:?}"),
+        ));
+    }
+    Ok(Camera {
+        id: 0,
+        model,
+        width: w.round() as u64,
+        height: h.round() as u64,
+        params,
+    })
+}
+
+#[cfg(test)]
+mod tests {
+    #![allow(clippy::unwrap_used, clippy::expect_used)]
+    use super::*;
+
+    fn touch_png(p: &Path, w: u32, h: u32) {
+        crate::io::write_png_gray8(p, &image::GrayImage::new(w, h)).unwrap();
+    }
+
+    #[test]
+    fn known_camera_converts_axes() {
+        // OpenGL camera at (0,0,5) with identity rotation looks down -z at the origin.
+        let mut c2w = Matrix4::identity();
+        c2w[(2, 3)] = 5.0;
+        let pose = pose_from_c2w_opengl(&c2w);
+        let o = pose.transform(Vector3::zeros());
+        assert!(
+            (o - Vector3::new(0.0, 0.0, 5.0)).norm() < 1e-12,
+            "origin in front: {o}"
+        );
+        // World +x is image right, world +y (GL up) is image up (negative y).
+        let px = pose.transform(Vector3::x());
+        let py = pose.transform(Vector3::y());
+        assert!(px.x > 0.0 && py.y < 0.0);
+        assert!((pose.center() - Vector3::new(0.0, 0.0, 5.0)).norm() < 1e-12);
+    }
+
+    #[test]
+    fn c2w_round_trip() {
+        let pose = Pose::look_at(
+            Vector3::new(1.0, -2.0, 0.7),
+            Vector3::new(0.2, 0.1, 0.0),
+            Vector3::z(),
+        );
+        let m = c2w_opengl_from_pose(&pose);
+        let back = pose_from_c2w_opengl(&m);
+        assert!((back.world_to_camera() - pose.world_to_camera()).norm() < 1e-12);
+        // The GL camera looks along its -z column.
+        let fwd = -m.fixed_view::<3, 1>(0, 2).into_owned();
+        let target_dir = (Vector3::new(0.2, 0.1, 0.0) - pose.center()).normalize();
+        assert!((fwd - target_dir).norm() < 1e-12);
+    }
+
+    #[test]
+    fn instant_ngp_global_intrinsics_and_extensionless_paths() {
+        let dir = tempfile::tempdir().unwrap();
+        touch_png(&dir.path().join("images/a.png"), 8, 6);
+        touch_png(&dir.path().join("images/b.png"), 8, 6);
+        let json = r#"{"fl_x": 100.0, "fl_y": 101.0, "cx": 4.1, "cy": 3.2, "w": 8.0, "h": 6.0,
+            "k1": 0.05, "k2": -0.01, "p1": 0.001, "p2": 0.0, "aabb_scale": 4, "sharp": true,
+            "frames": [{"file_path": "images/a.png", "transform_matrix": [[1,0,0,0],[0,1,0,0],[0,0,1,2],[0,0,0,1]], "sharpness": 3.5},
+                       {"file_path": "images/b", "transform_matrix": [[1,0,0,1],[0,1,0,0],[0,0,1,2]]}]}"#;
+        let p = dir.path().join("transforms.json");
+        std::fs::write(&p, json).unwrap();
+        let t = read_transforms(&p).unwrap();
+        assert_eq!(t.aabb_scale, Some(4.0));
+        assert_eq!(t.frames[0].extra["sharpness"], 3.5);
+        let r = t.resolve(&p, dir.path()).unwrap();
+        assert_eq!(r[1].name, "b.png");
+        assert_eq!(r[0].camera.model, CameraModel::OPENCV);
+        assert_eq!(
+            r[0].camera.params,
+            vec![100.0, 101.0, 4.1, 3.2, 0.05, -0.01, 0.001, 0.0]
+        );
+        assert!((r[1].pose.center() - Vector3::new(1.0, 0.0, 2.0)).norm() < 1e-12);
+        // Write → read keeps everything, including unknown keys.
+        let q = dir.path().join("out.json");
+        write_transforms(&q, &t).unwrap();
+        assert_eq!(read_transforms(&q).unwrap(), t);
+    }
+
+    #[test]
+    fn camera_angle_only_and_per_frame_intrinsics() {
+        let dir = tempfile::tempdir().unwrap();
+        touch_png(&dir.path().join("r_0.png"), 10, 20);
+        let json = r#"{"camera_angle_x": 0.6911112070083618, "frames": [
+            {"file_path": "./r_0", "transform_matrix": [[1,0,0,0],[0,1,0,0],[0,0,1,0],[0,0,0,1]]},
+            {"file_path": "./r_0.png", "fl_x": 7.0, "w": 10, "h": 20, "transform_matrix": [[1,0,0,0],[0,1,0,0],[0,0,1,0],[0,0,0,1]]}]}"#;
+        let p = dir.path().join("transforms.json");
+        std::fs::write(&p, json).unwrap();
+        let r = read_transforms(&p)
+            .unwrap()
+            .resolve(&p, dir.path())
+            .unwrap();
+        let f = 0.5 * 10.0 / (0.5f64 * 0.6911112070083618).tan();
+        assert_eq!(r[0].camera.model, CameraModel::PINHOLE);
+        assert_eq!((r[0].camera.width, r[0].camera.height), (10, 20));
+        assert!(
+            (r[0].camera.params[0] - f).abs() < 1e-12 && (r[0].camera.params[1] - f).abs() < 1e-12
+        );
+        assert_eq!(r[0].camera.params[2..], [5.0, 10.0]);
+        assert_eq!(r[1].camera.params, vec![7.0, 7.0, 5.0, 10.0]);
+    }
+
+    #[test]
+    fn model_to_transforms_and_back() {
+        let mut m = ColmapModel::default();
+        let cam = Camera {
+            id: 1,
+            model: CameraModel::OPENCV,
+            width: 8,
+            height: 6,
+            params: vec![9.0, 9.5, 4.0, 3.0, 0.1, 0.0, 0.0, 0.01],
+        };
+        m.cameras.insert(1, cam.clone());
+        let pose = Pose::look_at(Vector3::new(0.0, -3.0, 1.0), Vector3::zeros(), Vector3::z());
+        m.images
+            .insert(5, crate::colmap::ColmapImage::new(5, pose, 1, "x.png"));
+        let t = Transforms::from_model(&m, "images/").unwrap();
+        let dir = tempfile::tempdir().unwrap();
+        touch_png(&dir.path().join("images/x.png"), 8, 6);
+        let p = dir.path().join("transforms.json");
+        write_transforms(&p, &t).unwrap();
+        let r = read_transforms(&p)
+            .unwrap()
+            .resolve(&p, dir.path())
+            .unwrap();
+        assert_eq!(r[0].camera.params, cam.params);
+        assert!((r[0].pose.world_to_camera() - pose.world_to_camera()).norm() < 1e-12);
+    }
+
+    #[test]
+    fn missing_image_and_bad_json_name_the_file() {
+        let dir = tempfile::tempdir().unwrap();
+        let p = dir.path().join("transforms.json");
+        std::fs::write(&p, r#"{"fl_x": 5, "w": 4, "h": 4, "frames": [{"file_path": "images/gone.jpg", "transform_matrix": [[1,0,0,0],[0,1,0,0],[0,0,1,0],[0,0,0,1]]}]}"#).unwrap();
+        let e = read_transforms(&p)
+            .unwrap()
+            .resolve(&p, dir.path())
+            .unwrap_err()
+            .to_string();
+        assert!(
+            e.contains("gone.jpg") && e.contains("not found") && e.contains("transforms.json"),
+            "{e}"
+        );
+        std::fs::write(&p, "{\"frames\": [").unwrap();
+        let e = read_transforms(&p).unwrap_err().to_string();
+        assert!(
+            e.contains("transforms.json") && e.contains("invalid"),
+            "{e}"
+        );
+    }
+}
