@@ -1,5 +1,12 @@
 //! splat: Gaussian splatting with wgpu kernels and a CPU reference.
 
+pub mod error;
+pub mod gpu;
+pub mod reference;
 pub mod types;
 
-pub use types::{ProjectedSplat, RenderCamera, RenderOptions, RenderOutput, SplatGrads, Splats};
+pub use error::{Result, SplatError};
+pub use types::{
+    AdamState, DensifyStats, ProjectedGrads, ProjectedSplat, RasterOutput, RenderCamera,
+    RenderOptions, RenderOutput, SplatGrads, Splats,
+};

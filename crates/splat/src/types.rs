@@ -97,7 +97,11 @@ impl RenderCamera {
             cx: k.cx as f32,
             cy: k.cy as f32,
             rotation,
-            translation: [pose.tvec[0] as f32, pose.tvec[1] as f32, pose.tvec[2] as f32],
+            translation: [
+                pose.tvec[0] as f32,
+                pose.tvec[1] as f32,
+                pose.tvec[2] as f32,
+            ],
             near: 0.01,
             far: 1e10,
         }
@@ -105,7 +109,10 @@ impl RenderCamera {
 
     /// Number of tiles along x and y.
     pub fn tile_grid(&self) -> (u32, u32) {
-        (self.width.div_ceil(TILE_SIZE), self.height.div_ceil(TILE_SIZE))
+        (
+            self.width.div_ceil(TILE_SIZE),
+            self.height.div_ceil(TILE_SIZE),
+        )
     }
 }
 
@@ -125,7 +132,12 @@ pub struct RenderOptions {
 
 impl Default for RenderOptions {
     fn default() -> Self {
-        RenderOptions { background: [0.0; 3], sh_degree: 0, low_pass: 0.3, antialiased: false }
+        RenderOptions {
+            background: [0.0; 3],
+            sh_degree: 0,
+            low_pass: 0.3,
+            antialiased: false,
+        }
     }
 }
 
@@ -174,4 +186,104 @@ pub struct SplatGrads {
     /// |dL/d mean2d| per splat (view-space positional gradient used for
     /// densification, in pixels, as INRIA's `xyz_gradient_accum` input).
     pub mean2d_abs: Vec<f32>,
+}
+
+/// Output of the forward rasterizer, with everything the backward pass needs.
+///
+/// Per-tile lists: tile `t` (row-major over [`RenderCamera::tile_grid`]) owns
+/// `tile_splats[tile_ranges[t][0] as usize..tile_ranges[t][1] as usize]`, the
+/// indices of the splats overlapping it sorted by (depth, splat index).
+#[derive(Debug, Clone, Default)]
+pub struct RasterOutput {
+    pub width: u32,
+    pub height: u32,
+    /// RGB, row-major, `width*height*3`.
+    pub image: Vec<f32>,
+    /// Final transmittance per pixel (`width*height`), i.e. T after the last
+    /// contributing splat (the background is weighted by it).
+    pub final_transmittance: Vec<f32>,
+    /// Per pixel: number of entries of its tile list processed up to and
+    /// including the last splat that contributed (INRIA's `n_contrib`);
+    /// 0 when nothing contributed. The backward pass starts there.
+    pub last_contrib: Vec<u32>,
+    /// Per tile `[start, end)` into `tile_splats`.
+    pub tile_ranges: Vec<[u32; 2]>,
+    /// Concatenated per-tile depth-sorted splat indices.
+    pub tile_splats: Vec<u32>,
+}
+
+/// Gradients w.r.t. the projected (2D) splats, one per splat, the output of
+/// rasterize-backward and the input of project-backward.
+#[repr(C)]
+#[derive(Debug, Clone, Copy, PartialEq, Pod, Zeroable, Default)]
+pub struct ProjectedGrads {
+    /// dL/d mean2d (pixels).
+    pub mean2d: [f32; 2],
+    /// Padding (keeps 16-byte rows for WGSL).
+    pub _pad0: [f32; 2],
+    /// dL/d conic (a, b, c) where the conic matrix is [[a, b], [b, c]]
+    /// (b is one scalar used in both off-diagonal entries).
+    pub conic: [f32; 3],
+    /// dL/d opacity (the post-sigmoid, post-compensation opacity).
+    pub opacity: f32,
+    /// dL/d colour (after the clamp at 0).
+    pub color: [f32; 3],
+    pub _pad1: f32,
+}
+
+/// Adam optimiser state: first and second moments in the same layout as the
+/// parameters (a [`Splats`] used as a container of per-parameter values), plus
+/// the step count used for bias correction (shared by all groups, as in
+/// torch's Adam after INRIA's densification which keeps the step).
+#[derive(Debug, Clone, Default, PartialEq)]
+pub struct AdamState {
+    pub step: u64,
+    /// First moments.
+    pub m: Splats,
+    /// Second moments.
+    pub v: Splats,
+}
+
+impl AdamState {
+    /// Zero moments shaped like `params`.
+    pub fn zeros_like(params: &Splats) -> Self {
+        let z = Splats {
+            means: vec![[0.0; 3]; params.len()],
+            log_scales: vec![[0.0; 3]; params.len()],
+            rotations: vec![[0.0; 4]; params.len()],
+            opacity_logits: vec![0.0; params.len()],
+            sh: vec![0.0; params.sh.len()],
+            sh_degree: params.sh_degree,
+        };
+        AdamState {
+            step: 0,
+            m: z.clone(),
+            v: z,
+        }
+    }
+}
+
+/// Statistics accumulated over training steps for densification decisions
+/// (INRIA `xyz_gradient_accum`, `denom`, `max_radii2D`).
+#[derive(Debug, Clone, Default, PartialEq)]
+pub struct DensifyStats {
+    /// Σ over steps where the splat was visible of ‖dL/d mean2d‖ in NDC
+    /// units (pixel gradient × (width/2, height/2)), so INRIA's 2e-4
+    /// threshold applies unchanged.
+    pub grad_accum: Vec<f32>,
+    /// Number of steps where the splat was visible (radius > 0).
+    pub count: Vec<u32>,
+    /// Largest screen radius seen (pixels).
+    pub max_radius: Vec<f32>,
+}
+
+impl DensifyStats {
+    /// Zeroed statistics for `n` splats.
+    pub fn zeros(n: usize) -> Self {
+        DensifyStats {
+            grad_accum: vec![0.0; n],
+            count: vec![0; n],
+            max_radius: vec![0.0; n],
+        }
+    }
 }
