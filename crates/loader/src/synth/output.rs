@@ -9,6 +9,7 @@ use crate::colmap::{
 };
 use crate::error::{LoaderError, Result};
 use crate::io::{write_png_gray8, write_png_rgb8};
+use crate::transforms::{Transforms, write_transforms};
 use image::{GrayImage, RgbImage};
 use rand::SeedableRng;
 use rand::seq::SliceRandom;
@@ -162,6 +163,10 @@ pub(crate) fn write_model(
     let sparse = out.join("sparse").join("0");
     write_model_text(&model, &sparse)?;
     write_model_binary(&model, &sparse)?;
+    let tf = out.join("transforms.json");
+    let transforms =
+        Transforms::from_model(&model, "images/").map_err(|e| LoaderError::format(&tf, e))?;
+    write_transforms(&tf, &transforms)?;
     let n_obs = model.images.values().map(|im| im.points2d.len()).sum();
     Ok((model.points3d.len(), n_obs))
 }
