@@ -9,6 +9,7 @@ pub mod colmap;
 pub mod error;
 pub mod io;
 pub mod scene;
+pub mod synth;
 pub mod transforms;
 
 pub use camera::{Camera, CameraModel, Intrinsics, Pose};
