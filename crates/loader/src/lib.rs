@@ -8,8 +8,9 @@ pub mod camera;
 pub mod colmap;
 pub mod error;
 pub mod io;
+pub mod masks;
 pub mod scene;
-pub mod synth;
+pub mod split;
 pub mod transforms;
 
 pub use camera::{Camera, CameraModel, Intrinsics, Pose};
