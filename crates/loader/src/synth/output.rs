@@ -9,6 +9,7 @@ use crate::colmap::{
 };
 use crate::error::{LoaderError, Result};
 use crate::io::{write_png_gray8, write_png_rgb8};
+use crate::split::{Split, write_split};
 use crate::transforms::{Transforms, write_transforms};
 use image::{GrayImage, RgbImage};
 use rand::SeedableRng;
@@ -167,6 +168,14 @@ pub(crate) fn write_model(
     let transforms =
         Transforms::from_model(&model, "images/").map_err(|e| LoaderError::format(&tf, e))?;
     write_transforms(&tf, &transforms)?;
+    let (train, test): (Vec<_>, Vec<_>) = views
+        .iter()
+        .map(|v| v.name.clone())
+        .partition(|n| !n.starts_with("test_"));
+    write_split(
+        out.join("split.json"),
+        &Split::from_names(&train, &test, None),
+    )?;
     let n_obs = model.images.values().map(|im| im.points2d.len()).sum();
     Ok((model.points3d.len(), n_obs))
 }

@@ -429,6 +429,21 @@ fn points3d_project_onto_their_observations_and_colours() {
     let tracked: usize = bin.points3d.values().map(|p| p.track.len()).sum();
     assert_eq!(tracked, report.observations);
     assert_eq!(text, bin);
+    // split.json: training frames as clutter, test views as extra, in order.
+    let split = crate::split::read_split(dir.path().join("split.json")).unwrap();
+    let names: Vec<String> = bin
+        .images_by_name()
+        .iter()
+        .map(|im| im.name.clone())
+        .collect();
+    let r = split
+        .resolve(&dir.path().join("split.json"), &names)
+        .unwrap();
+    assert_eq!(r.clutter, (0..spec.frames as usize).collect::<Vec<_>>());
+    assert_eq!(
+        r.extra,
+        (spec.frames as usize..names.len()).collect::<Vec<_>>()
+    );
     // transforms.json holds the same poses (OpenGL camera-to-world).
     let tf = crate::transforms::read_transforms(dir.path().join("transforms.json")).unwrap();
     let frames = tf
