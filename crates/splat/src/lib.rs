@@ -1,6 +1,7 @@
 //! splat: Gaussian splatting with wgpu kernels and a CPU reference.
 
 pub mod error;
+pub mod export;
 pub mod gpu;
 pub mod reference;
 pub mod types;

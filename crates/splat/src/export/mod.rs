@@ -1,0 +1,216 @@
+//! Splat exports: the formats other tools read, and the clean-up pass run
+//! before exporting (issue 6, "Exports").
+//!
+//! - `.ply`: the INRIA 3DGS layout, our exchange format (written by
+//!   `crate::io`, this module only dispatches);
+//! - `.splat`: antimatter15's 32-byte web format ([`web_splat`]);
+//! - `.spz`: Niantic's gzip-compressed format, written and read ([`spz`]);
+//! - `.glb`: glTF binary with `KHR_gaussian_splatting` ([`glb`]);
+//! - [`clean`]: removes near-transparent, unseen, oversized and out-of-bounds
+//!   splats and reports how many of each.
+//!
+//! Every writer goes through `loader::io::write_bytes_atomic` (temp + rename).
+
+pub mod clean;
+pub mod glb;
+pub mod spz;
+pub mod web_splat;
+
+#[cfg(test)]
+pub(crate) mod test_data;
+
+pub use clean::{CleanOptions, CleanReport, SceneGeometry, clean};
+pub use glb::{GlbOptions, encode_glb, parse_glb, write_glb};
+pub use spz::{SpzOptions, decode_spz, encode_spz, read_spz, write_spz};
+pub use web_splat::{decode_splat, encode_splat, read_splat, write_splat};
+
+use crate::error::{Result, SplatError};
+use crate::types::Splats;
+use serde::{Deserialize, Serialize};
+use std::path::{Path, PathBuf};
+
+/// The degree-0 SH basis constant 1/(2√π): colour = 0.5 + SH_C0 · dc.
+pub const SH_C0: f32 = 0.282_094_8;
+
+pub(crate) fn sigmoid(x: f32) -> f32 {
+    1.0 / (1.0 + (-x).exp())
+}
+
+/// Normalise a (w, x, y, z) quaternion; a zero or non-finite one becomes the
+/// identity.
+pub(crate) fn normalized_wxyz(q: [f32; 4]) -> [f32; 4] {
+    let n = q.iter().map(|v| v * v).sum::<f32>().sqrt();
+    if n > 0.0 && n.is_finite() {
+        q.map(|v| v / n)
+    } else {
+        [1.0, 0.0, 0.0, 0.0]
+    }
+}
+
+/// SH sign flips of the higher-order coefficients (degree 1..3, INRIA order)
+/// under the 180° rotation about x that maps COLMAP's right-down-front axes to
+/// the right-up-back axes of SPZ and glTF: with axis flips (x, y, z) =
+/// (1, −1, −1) each basis function changes sign with the product of the flips
+/// of the axes it is odd in (the table of nianticlabs/spz
+/// `coordinateConverter`).
+const RUB_SH_FLIP: [f32; 15] = [
+    -1.0, -1.0, 1.0, // degree 1: y, z, x
+    -1.0, 1.0, 1.0, -1.0, 1.0, // degree 2: xy, yz, 1, xz, 1
+    -1.0, 1.0, -1.0, -1.0, 1.0, -1.0, 1.0, // degree 3: y, xyz, y, z, x, z, x
+];
+
+/// Rotate splats by 180° about x: COLMAP/OpenCV right-down-front world axes
+/// become right-up-back (y up, as glTF and SPZ expect), and back (the map is
+/// its own inverse). Positions (x, −y, −z); quaternions (w, x, −y, −z), which
+/// is R·Rot(q)·Rᵀ for R = diag(1, −1, −1) and leaves the covariance's
+/// principal scales unchanged; SH coefficients sign-flipped per basis
+/// function. A proper rotation, so handedness is kept.
+pub fn rdf_to_rub(s: &Splats) -> Splats {
+    let k = s.coeffs_per_channel();
+    let mut out = s.clone();
+    for p in &mut out.means {
+        p[1] = -p[1];
+        p[2] = -p[2];
+    }
+    for q in &mut out.rotations {
+        q[2] = -q[2];
+        q[3] = -q[3];
+    }
+    for coeffs in out.sh.chunks_exact_mut(k * 3) {
+        for j in 1..k {
+            let f = RUB_SH_FLIP[j - 1];
+            for v in &mut coeffs[j * 3..j * 3 + 3] {
+                *v *= f;
+            }
+        }
+    }
+    out
+}
+
+/// Reject NaN / infinite parameters (every format would silently corrupt them).
+pub(crate) fn check_finite(s: &Splats) -> Result<()> {
+    let bad = s
+        .means
+        .iter()
+        .flatten()
+        .chain(s.log_scales.iter().flatten())
+        .chain(s.rotations.iter().flatten())
+        .chain(&s.opacity_logits)
+        .chain(&s.sh)
+        .any(|v| !v.is_finite());
+    if bad {
+        return Err(SplatError::Invalid(
+            "splats contain NaN or infinite values".into(),
+        ));
+    }
+    Ok(())
+}
+
+/// Attach a file name to an error that lacks one.
+pub(crate) fn name_file(path: &Path, e: SplatError) -> SplatError {
+    match e {
+        SplatError::Invalid(msg) => SplatError::File {
+            path: path.to_path_buf(),
+            msg,
+        },
+        other => other,
+    }
+}
+
+/// An export format.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Serialize, Deserialize)]
+#[serde(rename_all = "lowercase")]
+pub enum ExportFormat {
+    Splat,
+    Glb,
+    Spz,
+}
+
+impl ExportFormat {
+    /// All formats.
+    pub const ALL: [ExportFormat; 3] = [ExportFormat::Splat, ExportFormat::Glb, ExportFormat::Spz];
+
+    /// The lower-case name, also the usual file extension.
+    pub fn name(self) -> &'static str {
+        match self {
+            ExportFormat::Splat => "splat",
+            ExportFormat::Glb => "glb",
+            ExportFormat::Spz => "spz",
+        }
+    }
+
+    /// The format a file extension names, if any.
+    pub fn from_path(path: &Path) -> Option<Self> {
+        let ext = path.extension()?.to_str()?.to_ascii_lowercase();
+        ext.parse().ok()
+    }
+}
+
+impl std::str::FromStr for ExportFormat {
+    type Err = SplatError;
+    fn from_str(s: &str) -> Result<Self> {
+        ExportFormat::ALL
+            .into_iter()
+            .find(|f| f.name().eq_ignore_ascii_case(s))
+            .ok_or_else(|| {
+                SplatError::Invalid(format!("unknown export format {s:?} (splat|glb|spz)"))
+            })
+    }
+}
+
+impl std::fmt::Display for ExportFormat {
+    fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
+        f.write_str(self.name())
+    }
+}
+
+/// Per-format options of [`export`].
+#[derive(Debug, Clone, Default, Serialize, Deserialize, PartialEq)]
+pub struct ExportOptions {
+    pub spz: SpzOptions,
+    pub glb: GlbOptions,
+}
+
+impl ExportOptions {
+    /// Check the options.
+    pub fn validate(&self) -> Result<()> {
+        self.spz.validate()
+    }
+}
+
+/// What [`export`] wrote.
+#[derive(Debug, Clone, Serialize, Deserialize, PartialEq)]
+pub struct ExportSummary {
+    pub format: ExportFormat,
+    pub path: PathBuf,
+    pub splats: usize,
+    pub bytes: u64,
+    /// SH degree stored in the file (`.splat` keeps only the DC colour).
+    pub sh_degree: u32,
+}
+
+/// Write `s` to `path` in `format` (atomically).
+pub fn export(
+    s: &Splats,
+    format: ExportFormat,
+    path: &Path,
+    opts: &ExportOptions,
+) -> Result<ExportSummary> {
+    opts.validate()?;
+    let (bytes, sh_degree) = match format {
+        ExportFormat::Splat => (write_splat(path, s)?, 0),
+        ExportFormat::Glb => (write_glb(path, s, &opts.glb)?, s.sh_degree),
+        ExportFormat::Spz => (write_spz(path, s, &opts.spz)?, s.sh_degree),
+    };
+    Ok(ExportSummary {
+        format,
+        path: path.to_path_buf(),
+        splats: s.len(),
+        bytes,
+        sh_degree,
+    })
+}
+
+#[cfg(test)]
+#[path = "tests.rs"]
+mod tests;
