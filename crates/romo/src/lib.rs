@@ -10,6 +10,7 @@
 pub mod error;
 pub mod flow;
 pub mod geometry;
+pub mod mlp;
 pub mod plane;
 
 pub use error::{Result, RomoError};
