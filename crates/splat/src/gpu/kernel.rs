@@ -49,15 +49,17 @@ pub struct KernelDecl {
 
 /// Shared helpers (structs, tile rectangles, projection math) prepended to every kernel.
 pub const COMMON_WGSL: &str = include_str!("../../../../shaders/splat/common.wgsl");
-/// Gradient accumulation with native float atomics.
+/// Gradient accumulation with native float atomics. Kernels that set
+/// `uses_grad_atomics` declare `grads: array<GradAtomic>` and call `grad_add`.
 pub const ATOMIC_FLOAT_WGSL: &str = "alias GradAtomic = atomic<f32>;\n\
-fn atomic_add_f32(p: ptr<storage, atomic<f32>, read_write>, v: f32) { atomicAdd(p, v); }\n";
-/// Gradient accumulation with a compare-and-swap loop on `atomic<u32>` (GL fallback).
+fn grad_add(i: u32, v: f32) { atomicAdd(&grads[i], v); }\n";
+/// Gradient accumulation with a compare-and-swap loop on `atomic<u32>` (the
+/// GL / llvmpipe fallback, where `SHADER_FLOAT32_ATOMIC` is missing).
 pub const ATOMIC_CAS_WGSL: &str = "alias GradAtomic = atomic<u32>;\n\
-fn atomic_add_f32(p: ptr<storage, atomic<u32>, read_write>, v: f32) {\n\
-    var old = atomicLoad(p);\n\
+fn grad_add(i: u32, v: f32) {\n\
+    var old = atomicLoad(&grads[i]);\n\
     loop {\n\
-        let r = atomicCompareExchangeWeak(p, old, bitcast<u32>(bitcast<f32>(old) + v));\n\
+        let r = atomicCompareExchangeWeak(&grads[i], old, bitcast<u32>(bitcast<f32>(old) + v));\n\
         if r.exchanged { break; }\n\
         old = r.old_value;\n\
     }\n\

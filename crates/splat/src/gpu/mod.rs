@@ -8,14 +8,17 @@
 //! The math follows the CPU reference in `crate::reference` exactly; tests
 //! compare the two stage by stage.
 
+pub mod backward;
 pub mod context;
 pub mod emit_keys;
 pub mod forward;
 pub mod kernel;
 pub mod prefix_sum;
 pub mod project;
+pub mod project_backward;
 pub mod radix_sort;
 pub mod rasterize;
+pub mod rasterize_backward;
 pub mod tile_ranges;
 
 #[cfg(test)]
@@ -49,4 +52,8 @@ pub static ALL_KERNELS: &[&kernel::KernelDecl] = &[
     &radix_sort::DECL,
     &emit_keys::DECL,
     &tile_ranges::DECL,
+    &project::DECL,
+    &rasterize::DECL,
+    &rasterize_backward::DECL,
+    &project_backward::DECL,
 ];

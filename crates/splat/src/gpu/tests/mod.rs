@@ -2,6 +2,7 @@
 //! `CI` environment variable is unset; under CI a missing adapter fails.
 #![allow(clippy::unwrap_used, clippy::expect_used)]
 
+mod backward;
 mod binning;
 mod forward;
 mod reflection;
@@ -34,7 +35,6 @@ pub(crate) fn ctx() -> Option<&'static GpuContext> {
 }
 
 /// Shared context forced onto the compare-and-swap atomics path.
-#[allow(dead_code)]
 pub(crate) fn ctx_cas() -> Option<&'static GpuContext> {
     static C: OnceLock<Option<GpuContext>> = OnceLock::new();
     C.get_or_init(|| {

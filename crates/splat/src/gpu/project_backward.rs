@@ -1,0 +1,169 @@
+//! Host for `shaders/splat/project_backward.wgsl`: from dL/d(projected splat)
+//! to dL/d(every splat parameter), one invocation per splat (INRIA
+//! `backward.cu` computeCov2DCUDA / preprocessCUDA; reference
+//! `reference::project_backward`). Also writes ‖dL/d mean2d‖ per splat for
+//! densification statistics.
+
+use super::kernel::{BindingDecl, BindingKind, Kernel, KernelDecl, Recorder, groups_1d};
+use super::project::{CameraUniforms, ParamBuffers};
+use super::{GpuContext, GpuError};
+
+/// Invocations per workgroup.
+pub const WORKGROUP_SIZE: u32 = 256;
+
+pub static DECL: KernelDecl = KernelDecl {
+    name: "project_backward",
+    source: include_str!("../../../../shaders/splat/project_backward.wgsl"),
+    entry_points: &["project_backward_main"],
+    bindings: &[
+        BindingDecl {
+            name: "cam",
+            binding: 0,
+            kind: BindingKind::Uniform,
+        },
+        BindingDecl {
+            name: "means",
+            binding: 1,
+            kind: BindingKind::StorageRead,
+        },
+        BindingDecl {
+            name: "log_scales",
+            binding: 2,
+            kind: BindingKind::StorageRead,
+        },
+        BindingDecl {
+            name: "rotations",
+            binding: 3,
+            kind: BindingKind::StorageRead,
+        },
+        BindingDecl {
+            name: "opacity_logits",
+            binding: 4,
+            kind: BindingKind::StorageRead,
+        },
+        BindingDecl {
+            name: "sh",
+            binding: 5,
+            kind: BindingKind::StorageRead,
+        },
+        BindingDecl {
+            name: "v_proj",
+            binding: 6,
+            kind: BindingKind::StorageRead,
+        },
+        BindingDecl {
+            name: "g_means",
+            binding: 7,
+            kind: BindingKind::StorageRw,
+        },
+        BindingDecl {
+            name: "g_log_scales",
+            binding: 8,
+            kind: BindingKind::StorageRw,
+        },
+        BindingDecl {
+            name: "g_rotations",
+            binding: 9,
+            kind: BindingKind::StorageRw,
+        },
+        BindingDecl {
+            name: "g_opacity_logits",
+            binding: 10,
+            kind: BindingKind::StorageRw,
+        },
+        BindingDecl {
+            name: "g_sh",
+            binding: 11,
+            kind: BindingKind::StorageRw,
+        },
+        BindingDecl {
+            name: "mean2d_abs",
+            binding: 12,
+            kind: BindingKind::StorageRw,
+        },
+    ],
+    uniform: Some(("CameraUniforms", std::mem::size_of::<CameraUniforms>())),
+    uses_grad_atomics: false,
+};
+
+/// Parameter gradients resident on the GPU (same layout as [`ParamBuffers`]).
+pub struct GradBuffers {
+    pub means: wgpu::Buffer,
+    pub log_scales: wgpu::Buffer,
+    pub rotations: wgpu::Buffer,
+    pub opacity_logits: wgpu::Buffer,
+    pub sh: wgpu::Buffer,
+    /// ‖dL/d mean2d‖ per splat (pixels).
+    pub mean2d_abs: wgpu::Buffer,
+}
+
+impl GradBuffers {
+    /// Buffers shaped like `p`.
+    pub fn like(ctx: &GpuContext, p: &ParamBuffers) -> Self {
+        let n = p.n as u64;
+        let k3 = crate::types::sh_coeffs(p.sh_degree) as u64 * 3;
+        GradBuffers {
+            means: ctx.storage("g_means", n * 12),
+            log_scales: ctx.storage("g_log_scales", n * 12),
+            rotations: ctx.storage("g_rotations", n * 16),
+            opacity_logits: ctx.storage("g_opacity_logits", n * 4),
+            sh: ctx.storage("g_sh", n * k3 * 4),
+            mean2d_abs: ctx.storage("mean2d_abs", n * 4),
+        }
+    }
+}
+
+/// Arguments of one backward projection.
+pub struct ProjectBackwardArgs<'a> {
+    pub cam: &'a wgpu::Buffer,
+    pub params: &'a ParamBuffers,
+    /// `12·n` f32 ([`crate::types::ProjectedGrads`] layout).
+    pub v_proj: &'a wgpu::Buffer,
+    pub grads: &'a GradBuffers,
+}
+
+/// The compiled kernel.
+pub struct ProjectBackward {
+    kernel: Kernel,
+}
+
+impl ProjectBackward {
+    pub fn new(ctx: &GpuContext) -> Self {
+        ProjectBackward {
+            kernel: Kernel::new(ctx, &DECL),
+        }
+    }
+
+    pub fn dispatch(
+        &self,
+        ctx: &GpuContext,
+        rec: &mut Recorder,
+        a: &ProjectBackwardArgs,
+    ) -> Result<(), GpuError> {
+        let (p, g) = (a.params, a.grads);
+        let bind = self.kernel.bind(
+            ctx,
+            &[
+                ("cam", a.cam),
+                ("means", &p.means),
+                ("log_scales", &p.log_scales),
+                ("rotations", &p.rotations),
+                ("opacity_logits", &p.opacity_logits),
+                ("sh", &p.sh),
+                ("v_proj", a.v_proj),
+                ("g_means", &g.means),
+                ("g_log_scales", &g.log_scales),
+                ("g_rotations", &g.rotations),
+                ("g_opacity_logits", &g.opacity_logits),
+                ("g_sh", &g.sh),
+                ("mean2d_abs", &g.mean2d_abs),
+            ],
+        )?;
+        rec.dispatch(
+            &self.kernel,
+            "project_backward_main",
+            &bind,
+            groups_1d(p.n, WORKGROUP_SIZE),
+        )
+    }
+}
