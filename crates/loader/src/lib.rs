@@ -12,8 +12,7 @@ pub mod masks;
 pub mod scene;
 pub mod split;
 pub mod transforms;
-pub mod synth;
 
 pub use camera::{Camera, CameraModel, Intrinsics, Pose};
 pub use error::{LoaderError, Result};
-pub use scene::Frame;
+pub use scene::{Frame, Scene, SceneOptions};
