@@ -89,6 +89,8 @@ pub enum Pattern {
     Brick,
     /// Plaster: multi-octave noise with blotches and painted bands.
     Plaster,
+    /// Plaster façade with a grid of individually varied windows.
+    Facade,
     /// Irregular checker of per-cell palette colours (boxes, tiles).
     Checker,
     /// Poster: random overlapping discs and bars on a background.
@@ -110,6 +112,48 @@ pub struct Style {
 }
 
 impl Style {
+    /// A window of a façade's 2.6 m × 3.1 m grid at (x, y) (frame, glass,
+    /// per-window curtain and reflections), or None between windows.
+    fn window(&self, x: f64, y: f64, fine: f64) -> Option<Rgb> {
+        let s = self.seed;
+        let (wx, wy) = (x / 2.6, (y - 0.9) / 3.1);
+        let (cx, cy) = (wx.floor(), wy.floor());
+        let (fx, fy) = (wx - cx, wy - cy);
+        if !(y > 0.9 && (0.25..0.75).contains(&fx) && (0.2..0.75).contains(&fy)) {
+            return None;
+        }
+        let hw = hash01(cx as i64, cy as i64, s ^ 0x33);
+        let frame =
+            !(0.28..0.72).contains(&fx) || !(0.24..0.71).contains(&fy) || (fx - 0.5).abs() < 0.015;
+        if frame {
+            return Some(scale3([0.9, 0.88, 0.82], 0.8 + 0.2 * fine));
+        }
+        let curtain = [hw as f32, hash01(cx as i64, 5, s) as f32 * 0.7, 0.3];
+        let refl = fbm(x + hw * 10.0, y, 1.5, 4, s ^ 0x44);
+        let open = hash01(cx as i64 + 100, cy as i64, s) * 0.7;
+        let glass = if fy > open {
+            curtain
+        } else {
+            [0.12, 0.16, 0.22]
+        };
+        Some(lerp3(
+            glass,
+            [0.75, 0.82, 0.9],
+            (refl - 0.4).clamp(0.0, 0.5),
+        ))
+    }
+
+    /// Plaster: multi-octave noise, blotches and painted bands.
+    fn plaster(&self, x: f64, y: f64, fine: f64) -> Rgb {
+        let (s, p) = (self.seed, &self.palette);
+        let n = fbm(x, y, 1.2, 6, s);
+        let blot = fbm(x, y, 0.4, 3, s ^ 0x12);
+        let c = lerp3(p[0], p[1], n);
+        let c = lerp3(c, p[2], ((blot - 0.55) * 4.0).clamp(0.0, 1.0));
+        let band = ((y * 1.3 + 0.3 * value_noise(x * 0.7, 0.0, s)).fract() < 0.08) as u8 as f64;
+        lerp3(scale3(c, 0.85 + 0.3 * fine), p[3], band * 0.8)
+    }
+
     /// Colour at metric face coordinates (x right, y up), in metres.
     pub fn texel(&self, x: f64, y: f64) -> Rgb {
         let s = self.seed;
@@ -142,28 +186,8 @@ impl Style {
                 lerp3(c, scale3(p[3], 0.5), ((stain - 0.62) * 3.0).clamp(0.0, 0.6))
             }
             Pattern::Brick => {
-                // Windows on a 2.6 m × 3.1 m grid, each with its own curtain colour.
-                let (wx, wy) = (x / 2.6, (y - 0.9) / 3.1);
-                let (cx, cy) = (wx.floor(), wy.floor());
-                let (fx, fy) = (wx - cx, wy - cy);
-                let hw = hash01(cx as i64, cy as i64, s ^ 0x33);
-                if y > 0.9 && (0.25..0.75).contains(&fx) && (0.2..0.75).contains(&fy) {
-                    let frame = !(0.28..0.72).contains(&fx)
-                        || !(0.24..0.71).contains(&fy)
-                        || (fx - 0.5).abs() < 0.015;
-                    if frame {
-                        scale3([0.9, 0.88, 0.82], 0.8 + 0.2 * fine)
-                    } else {
-                        let curtain = [hw as f32, hash01(cx as i64, 5, s) as f32 * 0.7, 0.3];
-                        let refl = fbm(x + hw * 10.0, y, 1.5, 4, s ^ 0x44);
-                        let open = hash01(cx as i64 + 100, cy as i64, s) * 0.7;
-                        let glass = if fy > open {
-                            curtain
-                        } else {
-                            [0.12, 0.16, 0.22]
-                        };
-                        lerp3(glass, [0.75, 0.82, 0.9], (refl - 0.4).clamp(0.0, 0.5))
-                    }
+                if let Some(w) = self.window(x, y, fine) {
+                    w
                 } else {
                     let bh = 0.16;
                     let row = (y / bh).floor();
@@ -188,15 +212,10 @@ impl Style {
                     )
                 }
             }
-            Pattern::Plaster => {
-                let n = fbm(x, y, 1.2, 6, s);
-                let blot = fbm(x, y, 0.4, 3, s ^ 0x12);
-                let c = lerp3(p[0], p[1], n);
-                let c = lerp3(c, p[2], ((blot - 0.55) * 4.0).clamp(0.0, 1.0));
-                let band =
-                    ((y * 1.3 + 0.3 * value_noise(x * 0.7, 0.0, s)).fract() < 0.08) as u8 as f64;
-                lerp3(scale3(c, 0.85 + 0.3 * fine), p[3], band * 0.8)
-            }
+            Pattern::Plaster => self.plaster(x, y, fine),
+            Pattern::Facade => self
+                .window(x, y, fine)
+                .unwrap_or_else(|| self.plaster(x, y, fine)),
             Pattern::Checker => {
                 let cell = 0.18 + 0.2 * hash01(1, 2, s);
                 let (cx, cy) = ((x / cell).floor() as i64, (y / cell).floor() as i64);

@@ -240,7 +240,7 @@ impl World {
                 if brick {
                     Pattern::Brick
                 } else {
-                    Pattern::Plaster
+                    Pattern::Facade
                 },
                 pal,
                 &[0, 1, 3],
