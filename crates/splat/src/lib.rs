@@ -1,9 +1,12 @@
 //! splat: Gaussian splatting with wgpu kernels and a CPU reference.
 
+pub mod backend;
 pub mod error;
 pub mod export;
 pub mod gpu;
+pub mod metrics;
 pub mod reference;
+pub mod train;
 pub mod types;
 
 pub use error::{Result, SplatError};

@@ -7,6 +7,7 @@
 // is deliberate: it is true for NaN, which must be culled.
 #![allow(clippy::needless_range_loop, clippy::neg_cmp_op_on_partial_ord)]
 
+pub mod backend;
 pub mod project;
 pub mod project_backward;
 pub mod rasterize;
@@ -14,6 +15,7 @@ pub mod rasterize_backward;
 pub mod real;
 pub mod sh;
 
+pub use backend::CpuBackend;
 pub use project::project;
 pub use project_backward::project_backward;
 pub use rasterize::rasterize;
