@@ -6,10 +6,16 @@
 //! This is where the RoMo paper's central claim — masks make ordinary SfM
 //! robust to moving objects — is delivered and measured.
 
+pub mod colmap_runner;
 pub mod error;
+pub mod gt_masks;
 pub mod metrics;
+pub mod model_info;
 pub mod process;
+pub mod trajectory;
+pub mod undistort;
 
+pub use colmap_runner::{ColmapOptions, ColmapPaths, ColmapReport, Matcher, Progress, run_colmap};
 pub use error::{PoseError, Result};
 pub use metrics::{
     Alignment, ErrorStats, NamedPose, PoseMetrics, PoseMetricsOptions, Sim3, evaluate, umeyama,
