@@ -12,6 +12,7 @@ pub mod masks;
 pub mod scene;
 pub mod split;
 pub mod transforms;
+pub mod synth;
 
 pub use camera::{Camera, CameraModel, Intrinsics, Pose};
 pub use error::{LoaderError, Result};
