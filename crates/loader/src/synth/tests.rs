@@ -465,3 +465,29 @@ fn points3d_project_onto_their_observations_and_colours() {
         assert!((f.camera.params[0] - cam.fx).abs() < 1e-9);
     }
 }
+
+#[test]
+fn scene_load_reads_the_generated_folder_in_capture_order() {
+    let dir = tempfile::tempdir().unwrap();
+    let spec = tiny_spec(8);
+    generate(&spec, dir.path()).unwrap();
+    let scene = crate::Scene::load(dir.path(), &crate::SceneOptions::default()).unwrap();
+    let n = spec.frames as usize;
+    let mut expect: Vec<String> = (0..n).map(frame_name).collect();
+    expect.extend((0..spec.test_views as usize).map(test_name));
+    assert_eq!(scene.names(), expect);
+    assert_eq!(scene.split_indices("clutter"), (0..n).collect::<Vec<_>>());
+    assert_eq!(
+        scene.split_indices("extra"),
+        (n..expect.len()).collect::<Vec<_>>()
+    );
+    let poses = path::training_poses(&spec);
+    for (i, f) in scene.frames.iter().enumerate() {
+        assert!(f.gt_motion_path.is_some(), "{}", f.name);
+        let pose = f.pose.unwrap();
+        if i < n {
+            assert!((pose.center() - poses[i].center()).norm() < 1e-9);
+        }
+        assert_eq!(f.intrinsics, intrinsics(&spec));
+    }
+}
