@@ -106,6 +106,31 @@ pub struct SceneGeometry {
 }
 
 impl SceneGeometry {
+    /// The training cameras of a loaded scene (the `clutter`/train split, or
+    /// every frame without split.json; frames without a pose are skipped) and
+    /// its COLMAP points3D when it has a model.
+    pub fn from_scene(scene: &loader::scene::Scene) -> Self {
+        let cameras = scene
+            .split_indices("train")
+            .into_iter()
+            .filter_map(|i| {
+                let f = &scene.frames[i];
+                Some(RenderCamera::from_loader(&f.intrinsics, f.pose.as_ref()?))
+            })
+            .collect();
+        let points = scene
+            .model
+            .as_ref()
+            .map(|m| {
+                m.points3d
+                    .values()
+                    .map(|p| [p.xyz[0] as f32, p.xyz[1] as f32, p.xyz[2] as f32])
+                    .collect()
+            })
+            .unwrap_or_default();
+        SceneGeometry { cameras, points }
+    }
+
     /// Cameras and points of a COLMAP model (every registered image; pinhole
     /// intrinsics at the model's resolution).
     pub fn from_colmap(model: &loader::colmap::ColmapModel) -> Self {

@@ -194,3 +194,51 @@ fn invalid_options_are_rejected() {
     };
     assert!(o.validate().is_err());
 }
+
+#[test]
+fn scene_geometry_from_a_colmap_model() {
+    use loader::colmap::{ColmapImage, ColmapModel, Point3D};
+    let mut m = ColmapModel::default();
+    m.cameras.insert(
+        1,
+        loader::Camera {
+            id: 1,
+            model: loader::CameraModel::PINHOLE,
+            width: 640,
+            height: 480,
+            params: vec![500.0, 510.0, 320.0, 240.0],
+        },
+    );
+    // 90° about z, then a translation: centre = -Rᵀ t.
+    let h = std::f64::consts::FRAC_1_SQRT_2;
+    let pose = loader::Pose {
+        qvec: [h, 0.0, 0.0, h],
+        tvec: [1.0, 2.0, 3.0],
+    };
+    m.images.insert(7, ColmapImage::new(7, pose, 1, "a.jpg"));
+    m.images
+        .insert(9, ColmapImage::new(9, loader::Pose::identity(), 1, "b.jpg"));
+    for id in 0..3u64 {
+        let xyz = [id as f64, 0.5, -1.0];
+        m.points3d.insert(
+            id,
+            Point3D {
+                id,
+                xyz,
+                rgb: [0; 3],
+                error: 0.1,
+                track: Vec::new(),
+            },
+        );
+    }
+    let g = SceneGeometry::from_colmap(&m);
+    assert_eq!(g.cameras.len(), 2);
+    assert_eq!(g.points.len(), 3);
+    assert_eq!(g.points[2], [2.0, 0.5, -1.0]);
+    let c = g.cameras[0];
+    assert_eq!((c.width, c.height, c.fx, c.fy), (640, 480, 500.0, 510.0));
+    let want = pose.center();
+    for a in 0..3 {
+        assert!((c.center()[a] - want[a] as f32).abs() < 1e-5);
+    }
+}

@@ -101,6 +101,37 @@ fn rdf_to_rub_is_a_rotation_of_every_attribute() {
     }
 }
 
+/// The exact parameters as CSV in the INRIA PLY column layout (what
+/// splat-transform prints for a .ply), for `scripts/compare_exports.py`.
+fn write_truth_csv(path: &Path, s: &Splats) {
+    let k = s.coeffs_per_channel();
+    let mut cols: Vec<String> = ["x", "y", "z", "scale_0", "scale_1", "scale_2"]
+        .iter()
+        .chain(&[
+            "f_dc_0", "f_dc_1", "f_dc_2", "opacity", "rot_0", "rot_1", "rot_2", "rot_3",
+        ])
+        .map(|c| c.to_string())
+        .collect();
+    cols.extend((0..3 * (k - 1)).map(|i| format!("f_rest_{i}")));
+    let mut out = cols.join(",") + "\n";
+    for i in 0..s.len() {
+        let mut row: Vec<f32> = Vec::new();
+        row.extend(s.means[i]);
+        row.extend(s.log_scales[i]);
+        row.extend(&s.sh[i * k * 3..i * k * 3 + 3]);
+        row.push(s.opacity_logits[i]);
+        row.extend(s.rotations[i]);
+        for c in 0..3 {
+            for j in 1..k {
+                row.push(s.sh[i * k * 3 + j * 3 + c]);
+            }
+        }
+        let row: Vec<String> = row.iter().map(|v| format!("{}", f64::from(*v))).collect();
+        out += &(row.join(",") + "\n");
+    }
+    loader::io::write_bytes_atomic(path, out.as_bytes()).unwrap();
+}
+
 #[test]
 fn write_samples_of_every_format_and_read_them_back() {
     let tmp;
@@ -112,6 +143,7 @@ fn write_samples_of_every_format_and_read_them_back() {
         }
     };
     let s = random_splats(SAMPLE_SPLATS, 3, 2024);
+    write_truth_csv(&dir.join("sample_truth.csv"), &s);
     let opts = ExportOptions::default();
     let mut sizes = Vec::new();
     for f in ExportFormat::ALL {
