@@ -8,11 +8,15 @@
 //! The math follows the CPU reference in `crate::reference` exactly; tests
 //! compare the two stage by stage.
 
+pub mod adam;
+pub mod backend;
 pub mod backward;
 pub mod context;
+pub mod densify_stats;
 pub mod emit_keys;
 pub mod forward;
 pub mod kernel;
+pub mod loss;
 pub mod prefix_sum;
 pub mod project;
 pub mod project_backward;
@@ -24,6 +28,7 @@ pub mod tile_ranges;
 #[cfg(test)]
 mod tests;
 
+pub use backend::GpuBackend;
 pub use context::{GpuContext, GpuOptions};
 
 /// Errors of the GPU backend.
@@ -56,4 +61,7 @@ pub static ALL_KERNELS: &[&kernel::KernelDecl] = &[
     &rasterize::DECL,
     &rasterize_backward::DECL,
     &project_backward::DECL,
+    &adam::DECL,
+    &loss::DECL,
+    &densify_stats::DECL,
 ];

@@ -7,6 +7,7 @@ mod binning;
 mod forward;
 mod reflection;
 mod scenes;
+mod train_step;
 
 use super::{GpuContext, GpuError, GpuOptions};
 use std::sync::OnceLock;

@@ -1,0 +1,118 @@
+//! Host for `shaders/splat/adam.wgsl`: Adam on the GPU, one dispatch per
+//! parameter group, matching `train::adam::adam_step` (torch.optim.Adam,
+//! INRIA ε = 1e-15) so the parameters and moments never leave the device.
+
+use super::kernel::{BindingDecl, BindingKind, Kernel, KernelDecl, Recorder, groups_1d};
+use super::{GpuContext, GpuError};
+use bytemuck::{Pod, Zeroable};
+
+/// Invocations per workgroup.
+pub const WORKGROUP_SIZE: u32 = 256;
+
+/// Uniforms of one group update (48 bytes).
+#[repr(C)]
+#[derive(Debug, Clone, Copy, Pod, Zeroable)]
+pub struct AdamUniforms {
+    /// Elements in the group.
+    pub n: u32,
+    /// Elements per splat when the group has a head with its own rate (SH), else 0.
+    pub stride: u32,
+    /// Leading elements of each stride using `lr_head` (3 = the SH DC of r, g, b).
+    pub head: u32,
+    pub pad: u32,
+    pub lr: f32,
+    pub lr_head: f32,
+    pub beta1: f32,
+    pub beta2: f32,
+    /// 1 − β1ᵗ.
+    pub bc1: f32,
+    /// sqrt(1 − β2ᵗ).
+    pub sbc2: f32,
+    pub eps: f32,
+    pub pad2: f32,
+}
+
+pub static DECL: KernelDecl = KernelDecl {
+    name: "adam",
+    source: include_str!("../../../../shaders/splat/adam.wgsl"),
+    entry_points: &["adam_main"],
+    bindings: &[
+        BindingDecl {
+            name: "u",
+            binding: 0,
+            kind: BindingKind::Uniform,
+        },
+        BindingDecl {
+            name: "params",
+            binding: 1,
+            kind: BindingKind::StorageRw,
+        },
+        BindingDecl {
+            name: "grads",
+            binding: 2,
+            kind: BindingKind::StorageRead,
+        },
+        BindingDecl {
+            name: "exp_avg",
+            binding: 3,
+            kind: BindingKind::StorageRw,
+        },
+        BindingDecl {
+            name: "exp_avg_sq",
+            binding: 4,
+            kind: BindingKind::StorageRw,
+        },
+    ],
+    uniform: Some(("AdamUniforms", std::mem::size_of::<AdamUniforms>())),
+    uses_grad_atomics: false,
+};
+
+/// One group's buffers.
+pub struct AdamArgs<'a> {
+    pub params: &'a wgpu::Buffer,
+    pub grads: &'a wgpu::Buffer,
+    pub exp_avg: &'a wgpu::Buffer,
+    pub exp_avg_sq: &'a wgpu::Buffer,
+    pub uniforms: AdamUniforms,
+}
+
+/// The compiled kernel.
+pub struct Adam {
+    kernel: Kernel,
+}
+
+impl Adam {
+    pub fn new(ctx: &GpuContext) -> Self {
+        Adam {
+            kernel: Kernel::new(ctx, &DECL),
+        }
+    }
+
+    pub fn dispatch(
+        &self,
+        ctx: &GpuContext,
+        rec: &mut Recorder,
+        a: &AdamArgs,
+    ) -> Result<(), GpuError> {
+        if a.uniforms.n == 0 {
+            return Ok(());
+        }
+        let u = ctx.uniform("adam_u", &a.uniforms);
+        let bind = self.kernel.bind(
+            ctx,
+            &[
+                ("u", &u),
+                ("params", a.params),
+                ("grads", a.grads),
+                ("exp_avg", a.exp_avg),
+                ("exp_avg_sq", a.exp_avg_sq),
+            ],
+        )?;
+        rec.dispatch(
+            &self.kernel,
+            "adam_main",
+            &bind,
+            groups_1d(a.uniforms.n, WORKGROUP_SIZE),
+        )
+    }
+}

@@ -1,0 +1,419 @@
+//! [`GpuBackend`]: the wgpu implementation of [`TrainBackend`]. Parameters,
+//! Adam moments and densification statistics stay on the device across
+//! steps; a step reads back only the tile-intersection count (to size the
+//! key buffers), the loss partial sums and the visible count. With a D-SSIM
+//! weight > 0 the rendered image is read back and the loss gradient computed
+//! on the CPU with `train::loss::loss_and_grad` (no GPU SSIM kernel yet);
+//! with weight 0 the masked L1 gradient is computed on the GPU.
+
+use super::adam::{Adam, AdamArgs, AdamUniforms};
+use super::backward::{BackwardArgs, BackwardKernels, projected_grads_buffer, record_backward};
+use super::densify_stats::{DensifyStatsKernel, StatsArgs, StatsBuffers};
+use super::forward::{ForwardKernels, Timings, forward, upload_splats};
+use super::kernel::Recorder;
+use super::loss::{Loss, LossArgs, LossUniforms, blocks};
+use super::project::ParamBuffers;
+use super::project_backward::GradBuffers;
+use super::{GpuContext, GpuError, GpuOptions};
+use crate::backend::{StepInput, StepStats, TrainBackend, check_step_input};
+use crate::error::{Result, SplatError};
+use crate::train::adam::AdamConfig;
+use crate::types::{AdamState, DensifyStats, RenderCamera, RenderOptions, RenderOutput, Splats};
+use std::collections::HashMap;
+
+impl From<GpuError> for SplatError {
+    fn from(e: GpuError) -> Self {
+        SplatError::Gpu(e.to_string())
+    }
+}
+
+/// A training view cached on the device.
+struct ViewCache {
+    target: wgpu::Buffer,
+    mask: Option<wgpu::Buffer>,
+    /// Σ mask (kept pixels).
+    kept: f64,
+}
+
+/// Everything resident for training.
+struct State {
+    params: ParamBuffers,
+    m: ParamBuffers,
+    v: ParamBuffers,
+    grads: GradBuffers,
+    stats: StatsBuffers,
+    step: u64,
+}
+
+/// The wgpu training backend.
+pub struct GpuBackend {
+    pub ctx: GpuContext,
+    fwd: ForwardKernels,
+    bwd: BackwardKernels,
+    adam: Adam,
+    loss: Loss,
+    stats_k: DensifyStatsKernel,
+    state: Option<State>,
+    views: HashMap<usize, ViewCache>,
+    /// Adam hyper-parameters (INRIA defaults).
+    pub adam_config: AdamConfig,
+    /// Record per-dispatch timestamps in the next steps (see [`GpuBackend::last_timings`]).
+    pub profile: bool,
+    timings: Timings,
+}
+
+fn unflat<const K: usize>(v: &[f32]) -> Vec<[f32; K]> {
+    v.chunks_exact(K)
+        .map(|c| std::array::from_fn(|i| c[i]))
+        .collect()
+}
+
+impl GpuBackend {
+    /// Open a device and compile every kernel (`GpuError::NoAdapter` when no
+    /// adapter exists, so callers can fall back to the CPU backend).
+    pub fn new(opts: &GpuOptions) -> std::result::Result<Self, GpuError> {
+        let ctx = GpuContext::new(opts)?;
+        Ok(GpuBackend {
+            fwd: ForwardKernels::new(&ctx),
+            bwd: BackwardKernels::new(&ctx),
+            adam: Adam::new(&ctx),
+            loss: Loss::new(&ctx),
+            stats_k: DensifyStatsKernel::new(&ctx),
+            ctx,
+            state: None,
+            views: HashMap::new(),
+            adam_config: AdamConfig::default(),
+            profile: false,
+            timings: Vec::new(),
+        })
+    }
+
+    /// Per-dispatch timings of the last step (empty unless `profile` is set
+    /// and the device has timestamp queries).
+    pub fn last_timings(&self) -> &Timings {
+        &self.timings
+    }
+
+    fn upload_view(&self, input: &StepInput<'_>) -> ViewCache {
+        let kept = input
+            .mask
+            .map_or((input.camera.width * input.camera.height) as f64, |m| {
+                m.iter().map(|&v| v as f64).sum()
+            });
+        ViewCache {
+            target: self.ctx.upload("target", input.target),
+            mask: input.mask.map(|m| self.ctx.upload("mask", m)),
+            kept,
+        }
+    }
+
+    fn moments(&self, a: &Splats) -> std::result::Result<ParamBuffers, GpuError> {
+        upload_splats(&self.ctx, a)
+    }
+}
+
+/// Splats → moments container check.
+fn same_shape(a: &Splats, b: &Splats) -> bool {
+    a.len() == b.len() && a.sh.len() == b.sh.len()
+}
+
+impl TrainBackend for GpuBackend {
+    fn name(&self) -> String {
+        format!(
+            "wgpu ({}, {:?})",
+            self.ctx.adapter_info.name, self.ctx.adapter_info.backend
+        )
+    }
+
+    fn upload(&mut self, params: &Splats, adam: &AdamState) -> Result<()> {
+        crate::error::check_splats(params)?;
+        if !same_shape(params, &adam.m) || !same_shape(params, &adam.v) {
+            return Err(SplatError::Invalid(
+                "Adam state does not match the splats".into(),
+            ));
+        }
+        let p = upload_splats(&self.ctx, params)?;
+        // Moments may carry a stale sh_degree; give them the params' one.
+        let mut m = adam.m.clone();
+        let mut v = adam.v.clone();
+        m.sh_degree = params.sh_degree;
+        v.sh_degree = params.sh_degree;
+        let (m, v) = (self.moments(&m)?, self.moments(&v)?);
+        let grads = GradBuffers::like(&self.ctx, &p);
+        let stats = StatsBuffers::zeros(&self.ctx, p.n);
+        self.state = Some(State {
+            params: p,
+            m,
+            v,
+            grads,
+            stats,
+            step: adam.step,
+        });
+        Ok(())
+    }
+
+    fn step(&mut self, input: &StepInput<'_>) -> Result<StepStats> {
+        check_step_input(input)?;
+        if self.state.is_none() {
+            return Err(SplatError::Invalid("step before upload".into()));
+        }
+        let cache_new = match input.view_id {
+            Some(id) => !self.views.contains_key(&id),
+            None => true,
+        };
+        let fresh = cache_new.then(|| self.upload_view(input));
+        if let (Some(id), Some(f)) = (input.view_id, fresh) {
+            self.views.insert(id, f);
+        }
+        let tmp;
+        let view = match input.view_id.and_then(|id| self.views.get(&id)) {
+            Some(v) => v,
+            None => {
+                tmp = self.upload_view(input);
+                &tmp
+            }
+        };
+        let Some(st) = self.state.as_mut() else {
+            return Err(SplatError::Invalid("step before upload".into()));
+        };
+        let ctx = &self.ctx;
+        let cam = input.camera;
+        let (fs, mut timings) =
+            forward(ctx, &self.fwd, &st.params, cam, &input.render, self.profile)?;
+        let pixels = cam.width * cam.height;
+        let v_image = ctx.storage("v_image", pixels as u64 * 12);
+        let lambda = input.loss.ssim_weight as f64;
+        let mut rec = Recorder::new(ctx, self.profile);
+        let (mut l1, mut mse, mut ssim, mut loss) = (0.0f64, 0.0f64, 1.0f64, 0.0f64);
+        let partials = ctx.storage("loss_partials", blocks(pixels) as u64 * 8);
+        if lambda > 0.0 {
+            // D-SSIM on the CPU from a readback (exactly the CPU backend's loss).
+            let image: Vec<f32> = ctx.read(&fs.image, pixels as usize * 3)?;
+            let (lv, grad) = crate::train::loss::loss_and_grad(
+                &image,
+                input.target,
+                input.mask,
+                (cam.width as usize, cam.height as usize),
+                lambda,
+            );
+            ctx.queue
+                .write_buffer(&v_image, 0, bytemuck::cast_slice(&grad));
+            (l1, mse, ssim, loss) = (lv.l1, lv.mse, lv.ssim, lv.loss);
+        } else {
+            let scale = if view.kept > 0.0 {
+                (1.0 - lambda) / (3.0 * view.kept)
+            } else {
+                0.0
+            };
+            self.loss.dispatch(
+                ctx,
+                &mut rec,
+                &LossArgs {
+                    image: &fs.image,
+                    target: &view.target,
+                    mask: view.mask.as_ref().unwrap_or(&view.target),
+                    v_image: &v_image,
+                    partials: &partials,
+                    uniforms: LossUniforms {
+                        n_pixels: pixels,
+                        has_mask: view.mask.is_some() as u32,
+                        pad: [0; 2],
+                        scale: scale as f32,
+                        pad2: [0.0; 3],
+                    },
+                },
+            )?;
+        }
+        let v_proj = projected_grads_buffer(ctx, st.params.n);
+        record_backward(
+            ctx,
+            &self.bwd,
+            &mut rec,
+            &BackwardArgs {
+                params: &st.params,
+                state: &fs,
+                v_image: &v_image,
+                v_proj: &v_proj,
+                grads: &st.grads,
+            },
+        )?;
+        self.stats_k.dispatch(
+            ctx,
+            &mut rec,
+            &StatsArgs {
+                cam: &fs.cam,
+                projected: &fs.projected,
+                v_proj: &v_proj,
+                stats: &st.stats,
+                n: st.params.n,
+            },
+        )?;
+        // Adam, every group (dense, as torch).
+        st.step += 1;
+        let c = &self.adam_config;
+        let t = st.step.min(i32::MAX as u64) as i32;
+        let base = AdamUniforms {
+            n: 0,
+            stride: 0,
+            head: 0,
+            pad: 0,
+            lr: 0.0,
+            lr_head: 0.0,
+            beta1: c.beta1,
+            beta2: c.beta2,
+            bc1: 1.0 - c.beta1.powi(t),
+            sbc2: (1.0 - c.beta2.powi(t)).sqrt(),
+            eps: c.eps,
+            pad2: 0.0,
+        };
+        let n = st.params.n;
+        let k3 = crate::types::sh_coeffs(st.params.sh_degree) as u32 * 3;
+        let lr = &input.lr;
+        let groups = [
+            (
+                &st.params.means,
+                &st.grads.means,
+                &st.m.means,
+                &st.v.means,
+                3 * n,
+                lr.means,
+                lr.means,
+                0,
+            ),
+            (
+                &st.params.log_scales,
+                &st.grads.log_scales,
+                &st.m.log_scales,
+                &st.v.log_scales,
+                3 * n,
+                lr.scales,
+                lr.scales,
+                0,
+            ),
+            (
+                &st.params.rotations,
+                &st.grads.rotations,
+                &st.m.rotations,
+                &st.v.rotations,
+                4 * n,
+                lr.rotations,
+                lr.rotations,
+                0,
+            ),
+            (
+                &st.params.opacity_logits,
+                &st.grads.opacity_logits,
+                &st.m.opacity_logits,
+                &st.v.opacity_logits,
+                n,
+                lr.opacity,
+                lr.opacity,
+                0,
+            ),
+            (
+                &st.params.sh,
+                &st.grads.sh,
+                &st.m.sh,
+                &st.v.sh,
+                k3 * n,
+                lr.sh_rest,
+                lr.sh_dc,
+                k3,
+            ),
+        ];
+        for (p, g, m, v, count, lr_rest, lr_head, stride) in groups {
+            let uniforms = AdamUniforms {
+                n: count,
+                stride,
+                head: 3,
+                lr: lr_rest,
+                lr_head,
+                ..base
+            };
+            self.adam.dispatch(
+                ctx,
+                &mut rec,
+                &AdamArgs {
+                    params: p,
+                    grads: g,
+                    exp_avg: m,
+                    exp_avg_sq: v,
+                    uniforms,
+                },
+            )?;
+        }
+        timings.extend(rec.finish()?);
+        if lambda <= 0.0 {
+            let parts: Vec<f32> = ctx.read(&partials, blocks(pixels) as usize * 2)?;
+            let norm = if view.kept > 0.0 {
+                1.0 / (3.0 * view.kept)
+            } else {
+                0.0
+            };
+            let sums = parts.chunks_exact(2).fold((0.0f64, 0.0f64), |a, c| {
+                (a.0 + c[0] as f64, a.1 + c[1] as f64)
+            });
+            l1 = sums.0 * norm;
+            mse = sums.1 * norm;
+            loss = l1;
+        }
+        let visible: u32 = ctx.read::<u32>(&st.stats.visible, 1)?[0];
+        self.timings = timings;
+        Ok(StepStats {
+            loss: loss as f32,
+            l1: l1 as f32,
+            ssim: ssim as f32,
+            psnr: (10.0 * (1.0 / mse.max(1e-20)).log10()) as f32,
+            visible,
+        })
+    }
+
+    fn download(&mut self) -> Result<(Splats, AdamState, DensifyStats)> {
+        let Some(st) = self.state.as_ref() else {
+            return Err(SplatError::Invalid("download before upload".into()));
+        };
+        let ctx = &self.ctx;
+        let n = st.params.n as usize;
+        let k3 = crate::types::sh_coeffs(st.params.sh_degree) * 3;
+        let read = |p: &ParamBuffers| -> std::result::Result<Splats, GpuError> {
+            Ok(Splats {
+                means: unflat(&ctx.read::<f32>(&p.means, n * 3)?),
+                log_scales: unflat(&ctx.read::<f32>(&p.log_scales, n * 3)?),
+                rotations: unflat(&ctx.read::<f32>(&p.rotations, n * 4)?),
+                opacity_logits: ctx.read(&p.opacity_logits, n)?,
+                sh: ctx.read(&p.sh, n * k3)?,
+                sh_degree: st.params.sh_degree,
+            })
+        };
+        let params = read(&st.params)?;
+        let adam = AdamState {
+            step: st.step,
+            m: read(&st.m)?,
+            v: read(&st.v)?,
+        };
+        let stats = DensifyStats {
+            grad_accum: ctx.read(&st.stats.grad_accum, n)?,
+            count: ctx.read(&st.stats.count, n)?,
+            max_radius: ctx.read(&st.stats.max_radius, n)?,
+        };
+        Ok((params, adam, stats))
+    }
+
+    fn render(
+        &mut self,
+        splats: &Splats,
+        cam: &RenderCamera,
+        opts: &RenderOptions,
+    ) -> Result<RenderOutput> {
+        let p = upload_splats(&self.ctx, splats)?;
+        let (fs, _) = forward(&self.ctx, &self.fwd, &p, cam, opts, false)?;
+        let px = (cam.width * cam.height) as usize;
+        Ok(RenderOutput {
+            width: cam.width,
+            height: cam.height,
+            image: self.ctx.read(&fs.image, px * 3)?,
+            final_transmittance: self.ctx.read(&fs.final_t, px)?,
+            projected: fs.read_projected(&self.ctx)?,
+        })
+    }
+}

@@ -1,0 +1,129 @@
+//! Host for `shaders/splat/densify_stats.wgsl`: per-step densification
+//! statistics kept on the GPU (INRIA `add_densification_stats`; the same
+//! update as `reference::backend::CpuBackend::step`) and the visible count.
+
+use super::kernel::{BindingDecl, BindingKind, Kernel, KernelDecl, Recorder, groups_1d};
+use super::project::CameraUniforms;
+use super::{GpuContext, GpuError};
+
+/// Invocations per workgroup.
+pub const WORKGROUP_SIZE: u32 = 256;
+
+pub static DECL: KernelDecl = KernelDecl {
+    name: "densify_stats",
+    source: include_str!("../../../../shaders/splat/densify_stats.wgsl"),
+    entry_points: &["densify_stats_main"],
+    bindings: &[
+        BindingDecl {
+            name: "cam",
+            binding: 0,
+            kind: BindingKind::Uniform,
+        },
+        BindingDecl {
+            name: "projected",
+            binding: 1,
+            kind: BindingKind::StorageRead,
+        },
+        BindingDecl {
+            name: "v_proj",
+            binding: 2,
+            kind: BindingKind::StorageRead,
+        },
+        BindingDecl {
+            name: "grad_accum",
+            binding: 3,
+            kind: BindingKind::StorageRw,
+        },
+        BindingDecl {
+            name: "vis_count",
+            binding: 4,
+            kind: BindingKind::StorageRw,
+        },
+        BindingDecl {
+            name: "max_radius",
+            binding: 5,
+            kind: BindingKind::StorageRw,
+        },
+        BindingDecl {
+            name: "visible",
+            binding: 6,
+            kind: BindingKind::StorageRw,
+        },
+    ],
+    uniform: Some(("CameraUniforms", std::mem::size_of::<CameraUniforms>())),
+    uses_grad_atomics: false,
+};
+
+/// Statistics buffers resident on the GPU.
+pub struct StatsBuffers {
+    pub grad_accum: wgpu::Buffer,
+    pub count: wgpu::Buffer,
+    pub max_radius: wgpu::Buffer,
+    /// One u32: visible splats in the last step (cleared by `dispatch`).
+    pub visible: wgpu::Buffer,
+}
+
+impl StatsBuffers {
+    /// Zeroed statistics for `n` splats.
+    pub fn zeros(ctx: &GpuContext, n: u32) -> Self {
+        let z = vec![0u32; n as usize];
+        StatsBuffers {
+            grad_accum: ctx.upload("grad_accum", &z),
+            count: ctx.upload("vis_count", &z),
+            max_radius: ctx.upload("max_radius", &z),
+            visible: ctx.upload("visible", &[0u32; 4]),
+        }
+    }
+}
+
+/// Buffers of one update.
+pub struct StatsArgs<'a> {
+    pub cam: &'a wgpu::Buffer,
+    pub projected: &'a wgpu::Buffer,
+    pub v_proj: &'a wgpu::Buffer,
+    pub stats: &'a StatsBuffers,
+    pub n: u32,
+}
+
+/// The compiled kernel.
+pub struct DensifyStatsKernel {
+    kernel: Kernel,
+}
+
+impl DensifyStatsKernel {
+    pub fn new(ctx: &GpuContext) -> Self {
+        DensifyStatsKernel {
+            kernel: Kernel::new(ctx, &DECL),
+        }
+    }
+
+    pub fn dispatch(
+        &self,
+        ctx: &GpuContext,
+        rec: &mut Recorder,
+        a: &StatsArgs,
+    ) -> Result<(), GpuError> {
+        rec.encoder.clear_buffer(&a.stats.visible, 0, None);
+        if a.n == 0 {
+            return Ok(());
+        }
+        let bind = self.kernel.bind(
+            ctx,
+            &[
+                ("cam", a.cam),
+                ("projected", a.projected),
+                ("v_proj", a.v_proj),
+                ("grad_accum", &a.stats.grad_accum),
+                ("vis_count", &a.stats.count),
+                ("max_radius", &a.stats.max_radius),
+                ("visible", &a.stats.visible),
+            ],
+        )?;
+        rec.dispatch(
+            &self.kernel,
+            "densify_stats_main",
+            &bind,
+            groups_1d(a.n, WORKGROUP_SIZE),
+        )
+    }
+}

@@ -1,0 +1,204 @@
+//! GPU Adam and a whole GPU training step against the CPU backend.
+
+use super::ctx;
+use super::scenes::{camera, random_splats};
+use crate::backend::{LearningRates, LossConfig, StepInput, TrainBackend};
+use crate::gpu::GpuBackend;
+use crate::gpu::adam::{Adam, AdamArgs, AdamUniforms};
+use crate::gpu::kernel::Recorder;
+use crate::reference::backend::CpuBackend;
+use crate::train::adam::AdamConfig;
+use crate::types::{AdamState, RenderOptions, Splats};
+use rand::{Rng, SeedableRng};
+
+#[test]
+fn adam_kernel_matches_cpu_formula() {
+    let Some(c) = ctx() else { return };
+    let adam = Adam::new(c);
+    let mut r = rand_pcg::Pcg64::seed_from_u64(9);
+    let n = 1000usize;
+    let mut p: Vec<f32> = (0..n).map(|_| r.random_range(-1.0f32..1.0)).collect();
+    let mut m = vec![0.0f32; n];
+    let mut v = vec![0.0f32; n];
+    let (pb, mb, vb) = (c.upload("p", &p), c.upload("m", &m), c.upload("v", &v));
+    let cfg = AdamConfig::default();
+    for t in 1..=4i32 {
+        let mut g: Vec<f32> = (0..n).map(|_| r.random_range(-1.0f32..1.0)).collect();
+        g[7] = f32::NAN; // non-finite gradients count as 0
+        let gb = c.upload("g", &g);
+        let (bc1, sbc2) = (1.0 - cfg.beta1.powi(t), (1.0 - cfg.beta2.powi(t)).sqrt());
+        // stride 10, head 3: elements with k % 10 < 3 use lr_head.
+        let (lr, lr_head) = (0.01f32, 0.05f32);
+        let uniforms = AdamUniforms {
+            n: n as u32,
+            stride: 10,
+            head: 3,
+            pad: 0,
+            lr,
+            lr_head,
+            beta1: cfg.beta1,
+            beta2: cfg.beta2,
+            bc1,
+            sbc2,
+            eps: cfg.eps,
+            pad2: 0.0,
+        };
+        let mut rec = Recorder::new(c, false);
+        adam.dispatch(
+            c,
+            &mut rec,
+            &AdamArgs {
+                params: &pb,
+                grads: &gb,
+                exp_avg: &mb,
+                exp_avg_sq: &vb,
+                uniforms,
+            },
+        )
+        .unwrap();
+        rec.finish().unwrap();
+        for k in 0..n {
+            let gk = if g[k].is_finite() { g[k] } else { 0.0 };
+            m[k] = cfg.beta1 * m[k] + (1.0 - cfg.beta1) * gk;
+            v[k] = cfg.beta2 * v[k] + (1.0 - cfg.beta2) * gk * gk;
+            let l = if k % 10 < 3 { lr_head } else { lr };
+            p[k] -= l / bc1 * m[k] / (v[k].sqrt() / sbc2 + cfg.eps);
+        }
+        let gp: Vec<f32> = c.read(&pb, n).unwrap();
+        for k in 0..n {
+            assert!(
+                (gp[k] - p[k]).abs() <= 1e-6,
+                "step {t} element {k}: {} vs {}",
+                gp[k],
+                p[k]
+            );
+        }
+    }
+}
+
+fn one_step(
+    b: &mut dyn TrainBackend,
+    s: &Splats,
+    input: &StepInput,
+) -> (
+    crate::backend::StepStats,
+    Splats,
+    crate::types::DensifyStats,
+) {
+    b.upload(s, &AdamState::zeros_like(s)).unwrap();
+    let st = b.step(input).unwrap();
+    let (p, _, d) = b.download().unwrap();
+    (st, p, d)
+}
+
+#[test]
+fn gpu_step_matches_cpu_step() {
+    if ctx().is_none() {
+        return;
+    }
+    let mut gpu = GpuBackend::new(&crate::gpu::GpuOptions::default()).unwrap();
+    let mut cpu = CpuBackend::new();
+    let (w, h) = (64u32, 48u32);
+    let cam = camera(w, h);
+    let s = random_splats(300, 1, 55, false);
+    let mut r = rand_pcg::Pcg64::seed_from_u64(56);
+    let target: Vec<f32> = (0..w * h * 3)
+        .map(|_| r.random_range(0.0f32..1.0))
+        .collect();
+    // Mask out a block of "moving" pixels.
+    let mask: Vec<f32> = (0..w * h)
+        .map(|i| {
+            if (i % w) < 20 && (i / w) < 20 {
+                0.0
+            } else {
+                1.0
+            }
+        })
+        .collect();
+    let lr = LearningRates {
+        means: 1.6e-4,
+        sh_dc: 2.5e-3,
+        sh_rest: 1.25e-4,
+        opacity: 0.05,
+        scales: 5e-3,
+        rotations: 1e-3,
+    };
+    for ssim_weight in [0.0f32, 0.2] {
+        let input = StepInput {
+            camera: &cam,
+            target: &target,
+            mask: Some(&mask),
+            view_id: Some(0),
+            lr,
+            loss: LossConfig { ssim_weight },
+            render: RenderOptions {
+                background: [0.1, 0.1, 0.1],
+                sh_degree: 1,
+                low_pass: 0.3,
+                antialiased: false,
+            },
+        };
+        let (gs, gp, gd) = one_step(&mut gpu, &s, &input);
+        let (cs, cp, cd) = one_step(&mut cpu, &s, &input);
+        assert_eq!(gs.visible, cs.visible, "visible");
+        for (a, b, name) in [
+            (gs.loss, cs.loss, "loss"),
+            (gs.l1, cs.l1, "l1"),
+            (gs.psnr, cs.psnr, "psnr"),
+            (gs.ssim, cs.ssim, "ssim"),
+        ] {
+            assert!(
+                (a - b).abs() <= 1e-4 * b.abs().max(1.0),
+                "λ={ssim_weight} {name}: {a} vs {b}"
+            );
+        }
+        // After one Adam step an element moves by ≈ ±lr (sign of its gradient), so
+        // elements whose gradient is ~0 may differ by up to 2·lr; nearly all agree.
+        let groups: [(&str, Vec<f32>, Vec<f32>, f32); 4] = [
+            (
+                "means",
+                gp.means.iter().flatten().copied().collect(),
+                cp.means.iter().flatten().copied().collect(),
+                lr.means,
+            ),
+            (
+                "log_scales",
+                gp.log_scales.iter().flatten().copied().collect(),
+                cp.log_scales.iter().flatten().copied().collect(),
+                lr.scales,
+            ),
+            (
+                "opacity",
+                gp.opacity_logits.clone(),
+                cp.opacity_logits.clone(),
+                lr.opacity,
+            ),
+            ("sh", gp.sh.clone(), cp.sh.clone(), lr.sh_dc),
+        ];
+        for (name, a, b, l) in groups {
+            let mut off = 0;
+            for (x, y) in a.iter().zip(&b) {
+                assert!(
+                    (x - y).abs() <= 2.0 * l + 1e-6,
+                    "λ={ssim_weight} {name}: {x} vs {y}"
+                );
+                if (x - y).abs() > 0.01 * l + 1e-6 {
+                    off += 1;
+                }
+            }
+            assert!(
+                off * 50 <= a.len(),
+                "λ={ssim_weight} {name}: {off} of {} elements differ",
+                a.len()
+            );
+        }
+        assert_eq!(gd.count, cd.count, "densify counts");
+        assert_eq!(gd.max_radius, cd.max_radius, "max radii");
+        let (cos, rel) =
+            super::backward::compare_grads("grad_accum", &gd.grad_accum, &cd.grad_accum);
+        assert!(
+            cos >= 0.999 && rel <= 1e-3,
+            "grad_accum cos {cos} rel {rel}"
+        );
+    }
+}

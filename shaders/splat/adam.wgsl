@@ -1,0 +1,48 @@
+// adam.wgsl — one Adam step (Kingma & Ba 2015) on one parameter group, as
+// torch.optim.Adam / `train::adam::adam_step`: m ← β1 m + (1−β1) g,
+// v ← β2 v + (1−β2) g², p ← p − lr/bc1 · m / (sqrt(v)/sqrt(bc2) + ε).
+// Non-finite gradients count as 0. Element k uses `lr_head` when
+// (k mod stride) < head (SH DC terms) and `lr` otherwise.
+
+struct AdamUniforms {
+    n: u32,
+    stride: u32,
+    head: u32,
+    pad: u32,
+    lr: f32,
+    lr_head: f32,
+    beta1: f32,
+    beta2: f32,
+    bc1: f32,
+    sbc2: f32,
+    eps: f32,
+    pad2: f32,
+}
+
+@group(0) @binding(0) var<uniform> u: AdamUniforms;
+@group(0) @binding(1) var<storage, read_write> params: array<f32>;
+@group(0) @binding(2) var<storage, read> grads: array<f32>;
+@group(0) @binding(3) var<storage, read_write> exp_avg: array<f32>;
+@group(0) @binding(4) var<storage, read_write> exp_avg_sq: array<f32>;
+
+@compute @workgroup_size(256)
+fn adam_main(@builtin(workgroup_id) wid: vec3<u32>, @builtin(num_workgroups) nwg: vec3<u32>,
+             @builtin(local_invocation_index) lid: u32) {
+    let k = linear_index(wid, nwg, lid, 256u);
+    if (k >= u.n) {
+        return;
+    }
+    var g = grads[k];
+    if (!is_finite(g)) {
+        g = 0.0;
+    }
+    let m = u.beta1 * exp_avg[k] + (1.0 - u.beta1) * g;
+    let v = u.beta2 * exp_avg_sq[k] + (1.0 - u.beta2) * g * g;
+    exp_avg[k] = m;
+    exp_avg_sq[k] = v;
+    var lr = u.lr;
+    if (u.stride > 0u && (k % u.stride) < u.head) {
+        lr = u.lr_head;
+    }
+    params[k] = params[k] - lr / u.bc1 * m / (sqrt(v) / u.sbc2 + u.eps);
+}

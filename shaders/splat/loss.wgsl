@@ -1,0 +1,65 @@
+// loss.wgsl — masked L1 loss gradient w.r.t. the rendered image (RoMo masks:
+// moving pixels weigh 0; normalised by 3·Σ mask, as `train::loss`):
+// dL/dx = (1−λ)·m·sign(x − y)/(3·kept). Also writes per-workgroup partial
+// sums of m·|d| and m·d² for the host to reduce (L1 value and PSNR).
+
+struct LossUniforms {
+    n_pixels: u32,
+    has_mask: u32,
+    pad0: u32,
+    pad1: u32,
+    // (1 − λ) / (3 · kept)
+    scale: f32,
+    pad2: f32,
+    pad3: f32,
+    pad4: f32,
+}
+
+@group(0) @binding(0) var<uniform> u: LossUniforms;
+@group(0) @binding(1) var<storage, read> image: array<f32>;
+@group(0) @binding(2) var<storage, read> target_rgb: array<f32>;
+@group(0) @binding(3) var<storage, read> mask: array<f32>;
+@group(0) @binding(4) var<storage, read_write> v_image: array<f32>;
+@group(0) @binding(5) var<storage, read_write> partials: array<f32>;
+
+var<workgroup> s_l1: array<f32, 256>;
+var<workgroup> s_se: array<f32, 256>;
+
+@compute @workgroup_size(256)
+fn l1_grad(@builtin(workgroup_id) wid: vec3<u32>, @builtin(num_workgroups) nwg: vec3<u32>,
+           @builtin(local_invocation_index) lid: u32) {
+    let block = wid.y * nwg.x + wid.x;
+    let i = block * 256u + lid;
+    var l1 = 0.0;
+    var se = 0.0;
+    if (i < u.n_pixels) {
+        var m = 1.0;
+        if (u.has_mask != 0u) {
+            m = mask[i];
+        }
+        for (var c = 0u; c < 3u; c++) {
+            let d = image[3u * i + c] - target_rgb[3u * i + c];
+            l1 += m * abs(d);
+            se += m * d * d;
+            var s = 0.0;
+            if (m != 0.0) {
+                s = sign(d);
+            }
+            v_image[3u * i + c] = u.scale * m * s;
+        }
+    }
+    s_l1[lid] = l1;
+    s_se[lid] = se;
+    workgroupBarrier();
+    for (var off = 128u; off > 0u; off = off / 2u) {
+        if (lid < off) {
+            s_l1[lid] += s_l1[lid + off];
+            s_se[lid] += s_se[lid + off];
+        }
+        workgroupBarrier();
+    }
+    if (lid == 0u) {
+        partials[2u * block] = s_l1[0];
+        partials[2u * block + 1u] = s_se[0];
+    }
+}
