@@ -87,6 +87,8 @@ pub struct Setup {
     /// Index of the source triangle in the list given to [`setup`].
     pub src: u32,
     tex: [f64; 2],
+    /// Nearest depth of the (clipped) triangle, for front-to-back order.
+    zmin: f64,
 }
 
 fn eval(p: &[f64; 3], x: f64, y: f64) -> f64 {
@@ -165,6 +167,7 @@ pub fn setup(view: &View, tris: &[Tri], textures: &[Texture]) -> Vec<Setup> {
                 continue;
             }
             out.push(Setup {
+                zmin: 1.0 / p0[2].max(p1[2]).max(p2[2]),
                 iz: plane(p0[2], p1[2], p2[2]),
                 uz: plane(p0[3], p1[3], p2[3]),
                 vz: plane(p0[4], p1[4], p2[4]),
@@ -214,12 +217,18 @@ fn row_span(st: &Setup, fy: f64, x0: usize, x1: usize) -> Option<(usize, usize)>
 /// depth test. With `limit`, a sample is only written where it is also
 /// nearer than `limit` (used to draw distractors over the static world).
 pub fn rasterize(setups: &[Setup], buf: &mut [Sample], ws: usize, limit: Option<&[Sample]>) {
+    // Front to back, so the depth test rejects hidden samples early; the
+    // result does not depend on the order except for exact depth ties,
+    // which the stable sort resolves deterministically.
+    let mut order: Vec<usize> = (0..setups.len()).collect();
+    order.sort_by(|a, b| setups[*a].zmin.total_cmp(&setups[*b].zmin));
     buf.par_chunks_mut(ws * BAND)
         .enumerate()
         .for_each(|(band, chunk)| {
             let row0 = band * BAND;
             let rows = chunk.len() / ws;
-            for (id, st) in setups.iter().enumerate() {
+            for &id in &order {
+                let st = &setups[id];
                 let [x0, x1, y0, y1] = st.bounds;
                 let (ya, yb) = (y0.max(row0), y1.min(row0 + rows - 1));
                 if ya > yb {

@@ -364,10 +364,16 @@ impl Texture {
         let lod = lod.clamp(0.0, max);
         let l0 = lod.floor();
         let t = lod - l0;
-        let a = self.bilinear(l0 as usize, u, v);
-        if t <= 0.0 {
-            return a;
+        // Blend two levels only near the middle of a level (cheaper than
+        // full trilinear; the supersampling box filter hides the rest).
+        if t <= 0.25 {
+            return self.bilinear(l0 as usize, u, v);
         }
+        if t >= 0.75 {
+            return self.bilinear(l0 as usize + 1, u, v);
+        }
+        let t = (t - 0.25) * 2.0;
+        let a = self.bilinear(l0 as usize, u, v);
         let b = self.bilinear(l0 as usize + 1, u, v);
         [
             a[0] + (b[0] - a[0]) * t,
