@@ -8,9 +8,17 @@
 //! features → a tiny MLP → refinement to full resolution → masks.
 
 pub mod error;
+pub mod features;
 pub mod flow;
 pub mod geometry;
+pub mod labels;
+pub mod metrics;
 pub mod mlp;
+pub mod pipeline;
 pub mod plane;
+pub mod refine;
+pub mod scene;
 
 pub use error::{Result, RomoError};
+pub use pipeline::{FeatureBackend, FrameReport, FrameSource, RomoOptions, RomoReport, Segmentation, segment_frames};
+pub use scene::{segment_paths, segment_scene};

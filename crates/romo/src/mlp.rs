@@ -29,6 +29,7 @@ pub const HIDDEN: usize = 8;
 /// τ² = 0.01. The Lipschitz weight, batch size and per-frame sampling are
 /// not stated in the paper; ours are documented here.
 #[derive(Debug, Clone, Serialize, Deserialize)]
+#[serde(default)]
 pub struct MlpOptions {
     /// Adam learning rate (paper: 0.02).
     pub lr: f64,

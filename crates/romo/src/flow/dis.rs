@@ -27,6 +27,7 @@ use serde::{Deserialize, Serialize};
 /// 8-px patches every 3 px, 25 descent iterations, 5 variational
 /// iterations) plus the coarse search (radius 4 px at the coarsest level).
 #[derive(Debug, Clone, Serialize, Deserialize)]
+#[serde(default)]
 pub struct DisOptions {
     /// Finest pyramid level that is computed (0 = full resolution; 1 = half,
     /// then bilinearly upsampled). Default 1.

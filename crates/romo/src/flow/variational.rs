@@ -18,6 +18,7 @@ use serde::{Deserialize, Serialize};
 /// Weights of the variational refinement. Defaults are DIS's (OpenCV's
 /// `DISOpticalFlow` MEDIUM preset: α = 20, δ = 5, γ = 10, 5 iterations).
 #[derive(Debug, Clone, Serialize, Deserialize)]
+#[serde(default)]
 pub struct VariationalOptions {
     /// Smoothness weight α (default 20).
     pub alpha: f32,

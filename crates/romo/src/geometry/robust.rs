@@ -30,6 +30,7 @@ pub enum ModelSelection {
 
 /// Options of the robust estimation.
 #[derive(Debug, Clone, Serialize, Deserialize)]
+#[serde(default)]
 pub struct RobustOptions {
     /// LMedS samples drawn per model (default 500: 99% confidence of an
     /// outlier-free 7-sample at 50% outliers needs 588; 500 is near).

@@ -1,0 +1,238 @@
+//! Stages 2–4 of RoMo: forward–backward cycle check, robust two-view model
+//! per adjacent pair, Sampson residuals, and the sparse labels
+//!
+//! `U_t = max(S_fwd, S_bwd) > u_factor·v` (likely moving),
+//! `L_t = max(S_fwd, S_bwd) < l_factor·v` (likely static),
+//!
+//! with `v` the frame's mean flow magnitude. **Units:** `S` is the Sampson
+//! distance in px (√ of the squared Sampson error, or the homography
+//! transfer error in px for low-parallax pairs) and `v` is in px, both at
+//! the working grid; the comparison is unit-consistent and invariant to the
+//! working resolution. (With px², `S > 2v` compares px² to px and its
+//! meaning changes with image scale.)
+
+use crate::flow::Flow;
+use crate::geometry::Pt;
+use crate::geometry::robust::{FitReport, RobustOptions, TwoView, fit_two_view};
+use rand::{Rng, SeedableRng};
+use rayon::prelude::*;
+use serde::{Deserialize, Serialize};
+
+/// Options of the labelling stages.
+#[derive(Debug, Clone, Serialize, Deserialize)]
+#[serde(default)]
+pub struct LabelOptions {
+    /// Cycle check (Sundaram et al. 2010): a correspondence survives when
+    /// `|f + b|² < cycle_rel·(|f|² + |b|²) + cycle_abs_px²` (default 0.01).
+    pub cycle_rel: f32,
+    /// Absolute part of the cycle threshold in grid px (default 0.5 px).
+    pub cycle_abs_px: f32,
+    /// U threshold factor on v (paper: 2).
+    pub u_factor: f32,
+    /// L threshold factor on v (paper: 0.01).
+    pub l_factor: f32,
+    /// Frames whose inlier ratio is below this are not used to train the
+    /// MLP (paper: 0.5). Inlier: residual below `inlier_sigmas`·σ̂ of the
+    /// pair's robust fit.
+    pub min_inlier_ratio: f32,
+    /// Correspondences (spread on a grid) used to fit each pair's model; the
+    /// residuals are then evaluated on all (default 2000).
+    pub fit_points: usize,
+    /// Robust estimation and model selection.
+    pub robust: RobustOptions,
+}
+
+impl Default for LabelOptions {
+    fn default() -> Self {
+        Self {
+            cycle_rel: 0.01,
+            cycle_abs_px: 0.5,
+            u_factor: 2.0,
+            l_factor: 0.01,
+            min_inlier_ratio: 0.5,
+            fit_points: 2000,
+            robust: RobustOptions::default(),
+        }
+    }
+}
+
+impl LabelOptions {
+    /// Check the options.
+    pub fn validate(&self) -> crate::Result<()> {
+        if self.u_factor <= self.l_factor || self.l_factor < 0.0 || self.fit_points < 15 {
+            return Err(crate::RomoError::Options(
+                "labels: need u_factor > l_factor >= 0 and fit_points >= 15".into(),
+            ));
+        }
+        self.robust.validate()
+    }
+}
+
+/// Forward–backward consistency of `f` (a → b) with `b` (b → a): one flag
+/// per pixel of frame a.
+pub fn cycle_valid(f: &Flow, b: &Flow, o: &LabelOptions) -> Vec<bool> {
+    let (w, h) = (f.w(), f.h());
+    (0..w * h)
+        .into_par_iter()
+        .map(|i| {
+            let (x, y) = ((i % w) as f32, (i / w) as f32);
+            let (u, v) = (f.u.data[i], f.v.data[i]);
+            let (x2, y2) = (x + u, y + v);
+            if x2 < 0.0 || y2 < 0.0 || x2 > (w - 1) as f32 || y2 > (h - 1) as f32 {
+                return false;
+            }
+            let (bu, bv) = b.sample(x2, y2);
+            let (du, dv) = (u + bu, v + bv);
+            du * du + dv * dv < o.cycle_rel * (u * u + v * v + bu * bu + bv * bv) + o.cycle_abs_px * o.cycle_abs_px
+        })
+        .collect()
+}
+
+/// Fit one pair's model on correspondences `x ↔ x + f(x)` at pixels where
+/// `usable`, spread over a grid (`fit_points` cells, one random pixel each).
+pub fn fit_pair(f: &Flow, usable: &[bool], o: &LabelOptions, seed: u64) -> crate::Result<(TwoView, FitReport)> {
+    let (w, h) = (f.w(), f.h());
+    let cell = ((w * h) as f64 / o.fit_points as f64).sqrt().max(1.0) as usize;
+    let mut rng = rand_pcg::Pcg64::seed_from_u64(seed);
+    let (mut a, mut b): (Vec<Pt>, Vec<Pt>) = (vec![], vec![]);
+    for cy in (0..h).step_by(cell) {
+        for cx in (0..w).step_by(cell) {
+            let (cw, ch) = (cell.min(w - cx), cell.min(h - cy));
+            for _ in 0..4 {
+                let x = cx + rng.random_range(0..cw);
+                let y = cy + rng.random_range(0..ch);
+                let i = y * w + x;
+                if usable[i] {
+                    a.push([x as f64, y as f64]);
+                    b.push([(x as f32 + f.u.data[i]) as f64, (y as f32 + f.v.data[i]) as f64]);
+                    break;
+                }
+            }
+        }
+    }
+    fit_two_view(&a, &b, &o.robust)
+}
+
+/// One side (forward or backward) of a frame's evidence.
+pub struct Side<'a> {
+    /// Flow from this frame to the neighbour.
+    pub flow: &'a Flow,
+    /// Cycle-consistent pixels of this frame.
+    pub valid: &'a [bool],
+    /// The pair's model.
+    pub model: TwoView,
+    /// Its fit report.
+    pub report: &'a FitReport,
+    /// True when this frame is the pair's second frame (backward side).
+    pub second: bool,
+}
+
+/// Labels of one frame.
+#[derive(Debug, Clone)]
+pub struct FrameLabels {
+    /// max(S_fwd, S_bwd) in px per pixel, NaN where no side is valid.
+    pub s: Vec<f32>,
+    /// Likely moving.
+    pub u: Vec<bool>,
+    /// Likely static.
+    pub l: Vec<bool>,
+    /// Mean flow magnitude (px).
+    pub v: f32,
+    /// Fraction of pixels with a valid residual that are inliers.
+    pub inlier_ratio: f32,
+    /// Fraction of all pixels in U.
+    pub u_coverage: f32,
+    /// Fraction of all pixels in L.
+    pub l_coverage: f32,
+    /// Fraction of pixels with a valid residual.
+    pub valid_ratio: f32,
+}
+
+/// Residuals, U and L for a frame from its forward and/or backward sides.
+pub fn frame_labels(sides: &[Side], o: &LabelOptions) -> FrameLabels {
+    let Some(first) = sides.first() else {
+        return FrameLabels {
+            s: vec![],
+            u: vec![],
+            l: vec![],
+            v: 0.0,
+            inlier_ratio: 0.0,
+            u_coverage: 0.0,
+            l_coverage: 0.0,
+            valid_ratio: 0.0,
+        };
+    };
+    let (w, h) = (first.flow.w(), first.flow.h());
+    let n = w * h;
+    let v = sides.iter().map(|s| s.flow.mean_magnitude()).sum::<f32>() / sides.len() as f32;
+    let s: Vec<f32> = (0..n)
+        .into_par_iter()
+        .map(|i| {
+            let (x, y) = ((i % w) as f64, (i / w) as f64);
+            let mut best = f32::NAN;
+            for sd in sides {
+                if !sd.valid[i] {
+                    continue;
+                }
+                let q = [x + sd.flow.u.data[i] as f64, y + sd.flow.v.data[i] as f64];
+                let r = if sd.second {
+                    sd.model.residual_px(q, [x, y])
+                } else {
+                    sd.model.residual_px([x, y], q)
+                } as f32;
+                if best.is_nan() || r > best {
+                    best = r;
+                }
+            }
+            best
+        })
+        .collect();
+    let inlier_thr = sides
+        .iter()
+        .map(|sd| (o.robust.inlier_sigmas * sd.report.sigma_px) as f32)
+        .fold(0.0f32, f32::max);
+    let (ut, lt) = (o.u_factor * v, o.l_factor * v);
+    let u: Vec<bool> = s.iter().map(|x| !x.is_nan() && *x > ut).collect();
+    let l: Vec<bool> = s.iter().map(|x| !x.is_nan() && *x < lt).collect();
+    let nv = s.iter().filter(|x| !x.is_nan()).count();
+    let ni = s.iter().filter(|x| !x.is_nan() && **x < inlier_thr).count();
+    FrameLabels {
+        inlier_ratio: ni as f32 / nv.max(1) as f32,
+        u_coverage: u.iter().filter(|b| **b).count() as f32 / n as f32,
+        l_coverage: l.iter().filter(|b| **b).count() as f32 / n as f32,
+        valid_ratio: nv as f32 / n as f32,
+        s,
+        u,
+        l,
+        v,
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    #![allow(clippy::unwrap_used, clippy::expect_used)]
+    use super::*;
+    use crate::plane::Plane;
+
+    #[test]
+    fn cycle_check_flags_inconsistent_flow() {
+        let f = Flow {
+            u: Plane::filled(20, 10, 2.0),
+            v: Plane::filled(20, 10, 0.0),
+        };
+        let mut b = Flow {
+            u: Plane::filled(20, 10, -2.0),
+            v: Plane::filled(20, 10, 0.0),
+        };
+        // Backward flow wrong in a region: those pixels (mapped into it) fail.
+        for y in 0..10 {
+            for x in 10..14 {
+                b.v.data[y * 20 + x] = 3.0;
+            }
+        }
+        let ok = cycle_valid(&f, &b, &LabelOptions::default());
+        assert!(ok[5 * 20 + 3]);
+        assert!(!ok[5 * 20 + 10]); // 10 + 2 = 12 lands in the bad region
+        assert!(!ok[5 * 20 + 19]); // leaves the frame
+    }
+}

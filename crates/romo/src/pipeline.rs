@@ -1,0 +1,449 @@
+//! The RoMo pipeline on a sequence of frames (DESIGN.md, steps 1–6), on a
+//! low-resolution working grid; [`crate::scene`] adds file I/O and
+//! full-resolution refinement.
+//!
+//! Working resolutions: the MLP, labels and features live on a grid whose
+//! long side is `grid_max_side` (≈ ¼ of a DAVIS frame); flow is computed on
+//! frames at `flow_scale` × that grid and resampled to it.
+
+use crate::features::{FeatureExtractor, FeatureMap, standardise};
+use crate::flow::dis::DisOptions;
+use crate::flow::{Flow, FlowEstimator};
+use crate::geometry::robust::{FitReport, TwoView};
+use crate::labels::{FrameLabels, LabelOptions, Side, cycle_valid, fit_pair, frame_labels};
+use crate::mlp::{Label, Mlp, MlpOptions, TrainReport, train};
+use crate::plane::{Plane, Rgb};
+use crate::refine::{RefineOptions, temporal_smooth};
+use crate::{Result, RomoError};
+use rand::{Rng, SeedableRng};
+use rayon::prelude::*;
+use serde::{Deserialize, Serialize};
+use std::collections::BTreeMap;
+use std::path::PathBuf;
+use std::time::Instant;
+
+/// Which feature extractor the pipeline uses.
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+#[serde(rename_all = "snake_case")]
+pub enum FeatureBackend {
+    /// The built-in hand-made descriptor (default).
+    Hand,
+    /// An ONNX encoder (XFeat layout; needs feature `onnx`), plus the
+    /// hand-made descriptor concatenated.
+    Onnx {
+        /// Path of the `.onnx` model.
+        model: PathBuf,
+    },
+}
+
+/// All RoMo options. `Default` gives the paper's settings where the paper
+/// states them (see each sub-struct).
+#[derive(Debug, Clone, Serialize, Deserialize)]
+#[serde(default)]
+pub struct RomoOptions {
+    /// Long side of the working grid in px (default 256).
+    pub grid_max_side: usize,
+    /// Flow is computed on frames of `flow_scale` × the grid (default 2).
+    pub flow_scale: usize,
+    /// Built-in flow parameters (DIS).
+    pub flow: DisOptions,
+    /// Cycle check, robust geometry and U/L thresholds.
+    pub labels: LabelOptions,
+    /// MLP training.
+    pub mlp: MlpOptions,
+    /// Rounds of (fit → label → train) (paper: 2).
+    pub iterations: usize,
+    /// Refinement to full resolution.
+    pub refine: RefineOptions,
+    /// Feature extractor.
+    pub features: FeatureBackend,
+    /// Master seed (sub-stages derive theirs from it).
+    pub seed: u64,
+    /// Output folder for `masks/` etc. (default: the scene folder).
+    pub out: Option<PathBuf>,
+    /// Also write `probabilities/<stem>.exr` (moving probability, full res).
+    pub save_probabilities: bool,
+    /// Also write `motion/<name>.png` overlays for looking at.
+    pub overlays: bool,
+}
+
+impl Default for RomoOptions {
+    fn default() -> Self {
+        Self {
+            grid_max_side: 256,
+            flow_scale: 2,
+            flow: DisOptions::default(),
+            labels: LabelOptions::default(),
+            mlp: MlpOptions::default(),
+            iterations: 2,
+            refine: RefineOptions::default(),
+            features: FeatureBackend::Hand,
+            seed: 0,
+            out: None,
+            save_probabilities: false,
+            overlays: false,
+        }
+    }
+}
+
+impl RomoOptions {
+    /// Check every option.
+    pub fn validate(&self) -> Result<()> {
+        if self.grid_max_side < 16 || self.flow_scale == 0 || self.iterations == 0 {
+            return Err(RomoError::Options(
+                "romo: grid_max_side >= 16, flow_scale >= 1, iterations >= 1 required".into(),
+            ));
+        }
+        self.flow.validate()?;
+        self.labels.validate()?;
+        self.mlp.validate()?;
+        self.refine.validate()
+    }
+
+    /// The working grid for frames of `w × h`.
+    pub fn grid_size(&self, w: usize, h: usize) -> (usize, usize) {
+        let s = (self.grid_max_side as f64 / w.max(h) as f64).min(1.0);
+        (((w as f64 * s).round() as usize).max(8), ((h as f64 * s).round() as usize).max(8))
+    }
+}
+
+/// Where frames come from (loaded on demand so a long video never sits in
+/// memory at full resolution).
+pub trait FrameSource: Sync {
+    /// Number of frames.
+    fn len(&self) -> usize;
+    /// True when there are no frames.
+    fn is_empty(&self) -> bool {
+        self.len() == 0
+    }
+    /// Frame `i` as RGB in [0, 1].
+    fn frame(&self, i: usize) -> Result<Rgb>;
+}
+
+impl FrameSource for [Rgb] {
+    fn len(&self) -> usize {
+        <[Rgb]>::len(self)
+    }
+    fn frame(&self, i: usize) -> Result<Rgb> {
+        self.get(i)
+            .cloned()
+            .ok_or_else(|| RomoError::Input(format!("frame {i} out of range")))
+    }
+}
+
+/// Per-frame diagnostics.
+#[derive(Debug, Clone, Default, Serialize, Deserialize)]
+pub struct FrameReport {
+    /// Frame index.
+    pub index: usize,
+    /// Image name (filled by the scene driver).
+    pub name: String,
+    /// Model of the forward pair (t, t+1): "F" or "H" ("" for the last).
+    pub model_fwd: String,
+    /// Inlier ratio of the frame's correspondences (last round).
+    pub inlier_ratio: f32,
+    /// Fraction of grid pixels in U (last round).
+    pub u_coverage: f32,
+    /// Fraction in L.
+    pub l_coverage: f32,
+    /// Fraction of pixels passing the cycle check on some side.
+    pub valid_ratio: f32,
+    /// Mean flow magnitude in grid px.
+    pub v_px: f32,
+    /// Dropped from MLP training (inlier ratio below the minimum).
+    pub dropped: bool,
+    /// Fraction of the grid called moving (H > threshold).
+    pub moving_fraction: f32,
+}
+
+/// What a RoMo run did.
+#[derive(Debug, Clone, Default, Serialize, Deserialize)]
+pub struct RomoReport {
+    /// Frames.
+    pub frames: Vec<FrameReport>,
+    /// Indices of frames dropped from training (last round).
+    pub dropped_frames: Vec<usize>,
+    /// One report per training round.
+    pub rounds: Vec<TrainReport>,
+    /// Pair fit reports of the last round (pair p = frames p, p+1).
+    pub pairs: Vec<FitReport>,
+    /// Wall-clock milliseconds per stage.
+    pub timings_ms: BTreeMap<String, f64>,
+    /// Working grid (w, h).
+    pub grid: (usize, usize),
+    /// Flow and feature backends used.
+    pub backends: Vec<String>,
+    /// Where masks were written (scene driver).
+    pub masks_dir: Option<PathBuf>,
+}
+
+/// Low-resolution result of [`segment_frames`].
+pub struct Segmentation {
+    /// Moving probability per frame on the grid.
+    pub probs: Vec<Plane>,
+    /// Diagnostics.
+    pub report: RomoReport,
+}
+
+struct Timer<'a>(&'a mut BTreeMap<String, f64>);
+
+impl Timer<'_> {
+    fn time<T>(&mut self, stage: &str, f: impl FnOnce() -> T) -> T {
+        let t = Instant::now();
+        let r = f();
+        *self.0.entry(stage.into()).or_default() += t.elapsed().as_secs_f64() * 1e3;
+        r
+    }
+}
+
+/// Everything computed once per video.
+struct Prepared {
+    fwd: Vec<Flow>,
+    bwd: Vec<Flow>,
+    valid_f: Vec<Vec<bool>>,
+    valid_b: Vec<Vec<bool>>,
+    feats: Vec<Vec<f32>>,
+    c: usize,
+}
+
+fn prepare(
+    src: &dyn FrameSource,
+    o: &RomoOptions,
+    flow: &dyn FlowEstimator,
+    fx: &dyn FeatureExtractor,
+    progress: &dyn Fn(&str, usize, usize),
+    report: &mut RomoReport,
+) -> Result<Prepared> {
+    let n = src.len();
+    let mut timings = BTreeMap::new();
+    let mut t = Timer(&mut timings);
+    let first = src.frame(0)?;
+    let (gw, gh) = o.grid_size(first.w(), first.h());
+    report.grid = (gw, gh);
+    let (fw, fh) = (gw * o.flow_scale, gh * o.flow_scale);
+    progress("load", 0, n);
+    let small: Vec<Rgb> = t.time("load", || {
+        (0..n)
+            .into_par_iter()
+            .map(|i| -> Result<Rgb> {
+                let f = src.frame(i)?;
+                if f.w() != first.w() || f.h() != first.h() {
+                    return Err(RomoError::Input(format!(
+                        "frame {i} is {}x{}, frame 0 is {}x{}: all frames must have one size",
+                        f.w(),
+                        f.h(),
+                        first.w(),
+                        first.h()
+                    )));
+                }
+                Ok(f.resize(fw, fh))
+            })
+            .collect::<Result<Vec<_>>>()
+    })?;
+    progress("flow", 0, n - 1);
+    let grays: Vec<Plane> = small.iter().map(|f| f.gray()).collect();
+    let flows: Vec<(Flow, Flow)> = t.time("flow", || {
+        (0..n - 1)
+            .into_par_iter()
+            .map(|p| -> Result<(Flow, Flow)> {
+                let f = flow.flow(&grays[p], &grays[p + 1])?.resize(gw, gh);
+                let b = flow.flow(&grays[p + 1], &grays[p])?.resize(gw, gh);
+                Ok((f, b))
+            })
+            .collect::<Result<Vec<_>>>()
+    })?;
+    progress("flow", n - 1, n - 1);
+    let (fwd, bwd): (Vec<Flow>, Vec<Flow>) = flows.into_iter().unzip();
+    let (valid_f, valid_b): (Vec<Vec<bool>>, Vec<Vec<bool>>) = t.time("cycle", || {
+        (0..n - 1)
+            .into_par_iter()
+            .map(|p| (cycle_valid(&fwd[p], &bwd[p], &o.labels), cycle_valid(&bwd[p], &fwd[p], &o.labels)))
+            .unzip()
+    });
+    progress("features", 0, n);
+    let mut maps: Vec<FeatureMap> = t.time("features", || {
+        small
+            .par_iter()
+            .map(|f| fx.extract(f, gw, gh).map(|m| m.resize(gw, gh)))
+            .collect::<Result<Vec<_>>>()
+    })?;
+    drop(small);
+    t.time("features", || standardise(&mut maps));
+    let c = maps.first().map_or(0, |m| m.c);
+    let feats = maps.iter().map(|m| m.pixel_major()).collect();
+    report.timings_ms.extend(timings);
+    Ok(Prepared {
+        fwd,
+        bwd,
+        valid_f,
+        valid_b,
+        feats,
+        c,
+    })
+}
+
+/// Fit every pair (excluding pixels in `moving`, per frame) and label every
+/// frame.
+fn label_round(
+    pr: &Prepared,
+    moving: Option<&[Vec<bool>]>,
+    o: &RomoOptions,
+    round: usize,
+) -> Result<(Vec<FrameLabels>, Vec<(TwoView, FitReport)>)> {
+    let np = pr.fwd.len();
+    let fits: Vec<(TwoView, FitReport)> = (0..np)
+        .into_par_iter()
+        .map(|p| {
+            let usable: Vec<bool> = match moving {
+                Some(m) => pr.valid_f[p].iter().zip(&m[p]).map(|(v, mv)| *v && !mv).collect(),
+                None => pr.valid_f[p].clone(),
+            };
+            let seed = o.seed ^ ((round as u64) << 32) ^ p as u64;
+            let mut lo = o.labels.clone();
+            lo.robust.seed = seed;
+            fit_pair(&pr.fwd[p], &usable, &lo, seed)
+                .or_else(|_| fit_pair(&pr.fwd[p], &pr.valid_f[p], &lo, seed))
+                .map_err(|e| RomoError::Geometry(format!("pair {p}–{}: {e}", p + 1)))
+        })
+        .collect::<Result<Vec<_>>>()?;
+    let labels = (0..=np)
+        .into_par_iter()
+        .map(|t| {
+            let mut sides = Vec::with_capacity(2);
+            if t < np {
+                sides.push(Side {
+                    flow: &pr.fwd[t],
+                    valid: &pr.valid_f[t],
+                    model: fits[t].0,
+                    report: &fits[t].1,
+                    second: false,
+                });
+            }
+            if t > 0 {
+                sides.push(Side {
+                    flow: &pr.bwd[t - 1],
+                    valid: &pr.valid_b[t - 1],
+                    model: fits[t - 1].0,
+                    report: &fits[t - 1].1,
+                    second: true,
+                });
+            }
+            frame_labels(&sides, &o.labels)
+        })
+        .collect();
+    Ok((labels, fits))
+}
+
+/// Draw training samples: per kept frame up to `samples_per_frame`, half
+/// from U when it has that many.
+fn samples(pr: &Prepared, labels: &[FrameLabels], keep: &[bool], o: &RomoOptions, round: usize) -> (Vec<f32>, Vec<Label>) {
+    let c = pr.c;
+    let mut rng = rand_pcg::Pcg64::seed_from_u64(o.seed ^ 0x5a5a ^ round as u64);
+    let (mut x, mut y) = (Vec::new(), Vec::new());
+    for (t, fl) in labels.iter().enumerate() {
+        if !keep[t] {
+            continue;
+        }
+        let mut u: Vec<usize> = (0..fl.u.len()).filter(|&i| fl.u[i]).collect();
+        let mut l: Vec<usize> = (0..fl.l.len()).filter(|&i| fl.l[i]).collect();
+        let cap = o.mlp.samples_per_frame;
+        if cap > 0 {
+            let nu = u.len().min(cap / 2);
+            let nl = l.len().min(cap - nu);
+            for (v, k) in [(&mut u, nu), (&mut l, nl)] {
+                for i in 0..k {
+                    let j = rng.random_range(i..v.len());
+                    v.swap(i, j);
+                }
+                v.truncate(k);
+            }
+        }
+        for (set, lab) in [(&u, Label::Moving), (&l, Label::Static)] {
+            for &i in set {
+                x.extend_from_slice(&pr.feats[t][i * c..(i + 1) * c]);
+                y.push(lab);
+            }
+        }
+    }
+    (x, y)
+}
+
+/// Run RoMo on `src` with the given backends; returns grid-resolution
+/// moving probabilities and the report. `progress(stage, done, total)` is
+/// called as stages advance.
+pub fn segment_frames(
+    src: &dyn FrameSource,
+    o: &RomoOptions,
+    flow: &dyn FlowEstimator,
+    fx: &dyn FeatureExtractor,
+    progress: &dyn Fn(&str, usize, usize),
+) -> Result<Segmentation> {
+    o.validate()?;
+    let n = src.len();
+    if n < 2 {
+        return Err(RomoError::Input(format!("need at least 2 frames, got {n}")));
+    }
+    let mut report = RomoReport {
+        backends: vec![flow.name().to_string(), fx.name().to_string()],
+        ..Default::default()
+    };
+    let pr = prepare(src, o, flow, fx, progress, &mut report)?;
+    let mut timings = BTreeMap::new();
+    let mut tm = Timer(&mut timings);
+    let mut mlp = Mlp::new(pr.c, o.seed ^ 0x11);
+    let mut probs: Vec<Vec<f32>> = Vec::new();
+    let mut last: Option<(Vec<FrameLabels>, Vec<(TwoView, FitReport)>)> = None;
+    for round in 0..o.iterations {
+        progress("geometry", round, o.iterations);
+        let moving: Option<Vec<Vec<bool>>> = (round > 0).then(|| {
+            probs
+                .iter()
+                .map(|p| p.iter().map(|h| *h > o.refine.threshold).collect())
+                .collect()
+        });
+        let (labels, fits) = tm.time("geometry", || label_round(&pr, moving.as_deref(), o, round))?;
+        let keep: Vec<bool> = labels.iter().map(|l| l.inlier_ratio >= o.labels.min_inlier_ratio).collect();
+        // If every frame would be dropped, train on all rather than nothing.
+        let keep = if keep.iter().any(|k| *k) { keep } else { vec![true; n] };
+        progress("mlp", round, o.iterations);
+        let rep = tm.time("mlp", || {
+            let (x, y) = samples(&pr, &labels, &keep, o, round);
+            train(&mut mlp, &x, &y, o.mlp.epochs_per_round, round == 0, &o.mlp, o.seed ^ round as u64)
+        });
+        report.rounds.push(rep);
+        probs = tm.time("mlp", || pr.feats.iter().map(|f| mlp.predict(f)).collect());
+        last = Some((labels, fits));
+    }
+    let (gw, gh) = report.grid;
+    let planes: Vec<Plane> = probs
+        .into_iter()
+        .map(|d| Plane { w: gw, h: gh, data: d })
+        .collect();
+    let planes = tm.time("refine", || temporal_smooth(&planes, o.refine.temporal_weight));
+    if let Some((labels, fits)) = last {
+        for (t, l) in labels.iter().enumerate() {
+            let dropped = l.inlier_ratio < o.labels.min_inlier_ratio;
+            if dropped {
+                report.dropped_frames.push(t);
+            }
+            report.frames.push(FrameReport {
+                index: t,
+                name: String::new(),
+                model_fwd: fits.get(t).map(|f| f.1.model.clone()).unwrap_or_default(),
+                inlier_ratio: l.inlier_ratio,
+                u_coverage: l.u_coverage,
+                l_coverage: l.l_coverage,
+                valid_ratio: l.valid_ratio,
+                v_px: l.v,
+                dropped,
+                moving_fraction: planes[t].data.iter().filter(|h| **h > o.refine.threshold).count() as f32
+                    / (gw * gh) as f32,
+            });
+        }
+        report.pairs = fits.into_iter().map(|f| f.1).collect();
+    }
+    for (k, v) in timings {
+        *report.timings_ms.entry(k).or_default() += v;
+    }
+    Ok(Segmentation { probs: planes, report })
+}

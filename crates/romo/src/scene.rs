@@ -1,0 +1,161 @@
+//! Stage 10 of RoMo and the entry point the CLI calls: run the pipeline on
+//! a scene folder (or a list of image files), refine each frame's
+//! probability to full resolution, and write `masks/<name>.png` (255 keep,
+//! 0 moving; COLMAP's convention), optional `motion/<name>.png` overlays and
+//! `probabilities/<stem>.exr`.
+
+use crate::features::{FeatureExtractor, HandFeatures};
+use crate::flow::dis::Dis;
+use crate::pipeline::{FeatureBackend, FrameSource, RomoOptions, RomoReport, segment_frames};
+use crate::plane::{Plane, Rgb};
+use crate::refine::{to_keep_mask, upsample_probability};
+use crate::{Result, RomoError};
+use rayon::prelude::*;
+use std::path::{Path, PathBuf};
+use std::time::Instant;
+
+/// Frames read from image files.
+pub struct PathSource {
+    /// Image files in capture order.
+    pub paths: Vec<PathBuf>,
+}
+
+impl FrameSource for PathSource {
+    fn len(&self) -> usize {
+        self.paths.len()
+    }
+    fn frame(&self, i: usize) -> Result<Rgb> {
+        let p = self
+            .paths
+            .get(i)
+            .ok_or_else(|| RomoError::Input(format!("frame {i} out of range")))?;
+        Ok(Rgb::from_image(&loader::io::read_rgb32f(p)?))
+    }
+}
+
+struct SceneSource<'a>(&'a loader::scene::Scene);
+
+impl FrameSource for SceneSource<'_> {
+    fn len(&self) -> usize {
+        self.0.frames.len()
+    }
+    fn frame(&self, i: usize) -> Result<Rgb> {
+        Ok(Rgb::from_image(&self.0.load_image(i)?))
+    }
+}
+
+/// The feature extractor selected by the options.
+pub fn make_extractor(o: &RomoOptions) -> Result<Box<dyn FeatureExtractor>> {
+    match &o.features {
+        FeatureBackend::Hand => Ok(Box::new(HandFeatures)),
+        #[cfg(feature = "onnx")]
+        FeatureBackend::Onnx { model } => Ok(Box::new(crate::onnx::WithHand(crate::onnx::OnnxFeatures::load(model)?))),
+        #[cfg(not(feature = "onnx"))]
+        FeatureBackend::Onnx { model } => Err(RomoError::Onnx(format!(
+            "{}: this build has no ONNX support (rebuild with `--features romo/onnx`)",
+            model.display()
+        ))),
+    }
+}
+
+/// Run RoMo on a loaded scene; writes into `opts.out` or the scene folder.
+pub fn segment_scene(
+    scene: &loader::scene::Scene,
+    opts: &RomoOptions,
+    progress: &dyn Fn(&str, usize, usize),
+) -> Result<RomoReport> {
+    let names: Vec<String> = scene.frames.iter().map(|f| f.name.clone()).collect();
+    let out = opts.out.clone().unwrap_or_else(|| scene.root.clone());
+    segment_source(&SceneSource(scene), &names, &out, opts, progress)
+}
+
+/// Run RoMo on image files; `names[i]` names frame i's outputs.
+pub fn segment_paths(
+    paths: &[PathBuf],
+    names: &[String],
+    out: &Path,
+    opts: &RomoOptions,
+    progress: &dyn Fn(&str, usize, usize),
+) -> Result<RomoReport> {
+    let src = PathSource {
+        paths: paths.to_vec(),
+    };
+    segment_source(&src, names, out, opts, progress)
+}
+
+fn segment_source(
+    src: &dyn FrameSource,
+    names: &[String],
+    out: &Path,
+    opts: &RomoOptions,
+    progress: &dyn Fn(&str, usize, usize),
+) -> Result<RomoReport> {
+    if names.len() != src.len() {
+        return Err(RomoError::Input("one name per frame required".into()));
+    }
+    let fx = make_extractor(opts)?;
+    let flow = Dis::new(opts.flow.clone());
+    let seg = segment_frames(src, opts, &flow, fx.as_ref(), progress)?;
+    let mut report = seg.report;
+    for (f, n) in report.frames.iter_mut().zip(names) {
+        f.name = n.clone();
+    }
+    let masks_dir = out.join("masks");
+    progress("write", 0, names.len());
+    let t = Instant::now();
+    (0..names.len()).into_par_iter().try_for_each(|i| -> Result<()> {
+        let frame = src.frame(i)?;
+        let guide = frame.gray();
+        let prob = upsample_probability(&seg.probs[i], &guide, &opts.refine);
+        let keep = to_keep_mask(&prob, opts.refine.threshold);
+        loader::masks::write_mask(loader::masks::mask_path(&masks_dir, &names[i]), &keep)?;
+        if opts.overlays {
+            write_overlay(&out.join("motion").join(format!("{}.png", names[i])), &frame, &prob, opts)?;
+        }
+        if opts.save_probabilities {
+            let stem = Path::new(&names[i])
+                .file_stem()
+                .map(|s| s.to_string_lossy().into_owned())
+                .unwrap_or_else(|| names[i].clone());
+            write_exr(&out.join("probabilities").join(format!("{stem}.exr")), &prob)?;
+        }
+        Ok(())
+    })?;
+    report.timings_ms.insert("refine_write".into(), t.elapsed().as_secs_f64() * 1e3);
+    progress("write", names.len(), names.len());
+    report.masks_dir = Some(masks_dir);
+    Ok(report)
+}
+
+/// Frame darkened, with moving pixels tinted red.
+fn write_overlay(path: &Path, frame: &Rgb, prob: &Plane, o: &RomoOptions) -> Result<()> {
+    let (w, h) = (frame.w(), frame.h());
+    let img = image::RgbImage::from_fn(w as u32, h as u32, |x, y| {
+        let i = y as usize * w + x as usize;
+        let moving = prob.data[i] > o.refine.threshold;
+        let px = |k: usize| frame.c[k].data[i].clamp(0.0, 1.0);
+        let (r, g, b) = if moving {
+            (0.5 + 0.5 * px(0), 0.4 * px(1), 0.4 * px(2))
+        } else {
+            (0.7 * px(0), 0.7 * px(1), 0.7 * px(2))
+        };
+        image::Rgb([(r * 255.0) as u8, (g * 255.0) as u8, (b * 255.0) as u8])
+    });
+    Ok(loader::io::write_png_rgb8(path, &img)?)
+}
+
+/// Single-channel ("Y") float EXR of the moving probability.
+fn write_exr(path: &Path, prob: &Plane) -> Result<()> {
+    use exr::prelude::*;
+    let (w, h) = (prob.w, prob.h);
+    let channels = SpecificChannels::build()
+        .with_channel("Y")
+        .with_pixel_fn(|p: Vec2<usize>| (prob.data[p.y() * w + p.x()],));
+    let image = Image::from_channels((w, h), channels);
+    let mut buf = std::io::Cursor::new(Vec::new());
+    image
+        .write()
+        .to_buffered(&mut buf)
+        .map_err(|e| RomoError::Input(format!("{}: EXR encoding failed: {e}", path.display())))?;
+    Ok(loader::io::write_bytes_atomic(path, buf.get_ref())?)
+}
