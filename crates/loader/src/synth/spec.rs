@@ -107,7 +107,7 @@ impl Default for SceneSpec {
             supersample: 3,
             fps: 10.0,
             test_views: 4,
-            test_offset: [0.25, -0.15, 0.0],
+            test_offset: [0.1, -0.25, 0.3],
             points3d: 2000,
             camera: CameraPathSpec::default(),
             world: WorldSpec::default(),

@@ -491,3 +491,25 @@ fn scene_load_reads_the_generated_folder_in_capture_order() {
         assert_eq!(f.intrinsics, intrinsics(&spec));
     }
 }
+
+#[test]
+fn rotation_spec_never_translates_and_test_views_leave_the_path() {
+    let rot = load_spec(repo_scene("rotation.toml")).unwrap();
+    let poses = path::training_poses(&rot);
+    let c0 = poses[0].center();
+    assert!(poses.iter().all(|p| (p.center() - c0).norm() < 1e-9));
+    let first = poses[0].rotation();
+    let last = poses[poses.len() - 1].rotation();
+    let angle = ((first * last.transpose()).trace() - 1.0).clamp(-2.0, 2.0) / 2.0;
+    assert!(angle.acos().to_degrees() > 10.0, "the camera pans");
+
+    let small = load_spec(repo_scene("small.toml")).unwrap();
+    let train = path::training_poses(&small);
+    for t in path::test_poses(&small) {
+        let d = train
+            .iter()
+            .map(|p| (p.center() - t.center()).norm())
+            .fold(f64::INFINITY, f64::min);
+        assert!(d > 0.15, "test view {d} m from the training path");
+    }
+}
