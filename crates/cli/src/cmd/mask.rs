@@ -1,0 +1,94 @@
+//! `romosplat mask --scene DIR [--out DIR]`: RoMo motion masks for a scene,
+//! written as `masks/<image name>.png` (255 keep, 0 moving).
+
+use crate::Ctx;
+use anyhow::Context;
+use std::path::PathBuf;
+
+/// `romosplat mask ...`
+#[derive(Debug, clap::Args)]
+pub struct Args {
+    /// Scene folder (with `images/`).
+    #[arg(long)]
+    pub scene: PathBuf,
+    /// Output folder for `masks/` (default: the scene folder).
+    #[arg(long)]
+    pub out: Option<PathBuf>,
+    /// Rounds of fit → label → train (paper: 2).
+    #[arg(long, default_value_t = 2)]
+    pub iterations: usize,
+    /// Also write `probabilities/<stem>.exr` (moving probability).
+    #[arg(long)]
+    pub save_probabilities: bool,
+    /// Also write `motion/<name>.png` overlays.
+    #[arg(long)]
+    pub overlays: bool,
+    /// ONNX feature encoder (XFeat layout), concatenated with the built-in
+    /// features; needs a build with `--features romo/onnx` and ORT_DYLIB_PATH.
+    #[arg(long)]
+    pub onnx_features: Option<PathBuf>,
+    /// Full options as JSON (a partial `RomoOptions`; flags above override).
+    #[arg(long)]
+    pub options: Option<PathBuf>,
+    /// Integer downscale of the frames on load.
+    #[arg(long, default_value_t = 1)]
+    pub downscale: u32,
+    /// Random seed.
+    #[arg(long, default_value_t = 0)]
+    pub seed: u64,
+}
+
+/// Run `romosplat mask`.
+pub fn run(args: &Args, ctx: &Ctx) -> anyhow::Result<serde_json::Value> {
+    let scene = loader::scene::Scene::load(
+        &args.scene,
+        &loader::scene::SceneOptions {
+            downscale: args.downscale,
+        },
+    )
+    .with_context(|| format!("loading scene {}", args.scene.display()))?;
+    let mut opts: romo::RomoOptions = match &args.options {
+        Some(p) => {
+            let s = std::fs::read_to_string(p).with_context(|| format!("{}", p.display()))?;
+            serde_json::from_str(&s)
+                .with_context(|| format!("{}: not a RomoOptions JSON", p.display()))?
+        }
+        None => romo::RomoOptions::default(),
+    };
+    opts.iterations = args.iterations;
+    opts.save_probabilities |= args.save_probabilities;
+    opts.overlays |= args.overlays;
+    opts.seed = args.seed;
+    if let Some(m) = &args.onnx_features {
+        opts.features = romo::FeatureBackend::Onnx { model: m.clone() };
+    }
+    if args.out.is_some() {
+        opts.out = args.out.clone();
+    }
+    ctx.info(format!(
+        "romo: {} frames from {}",
+        scene.frames.len(),
+        args.scene.display()
+    ));
+    let pb = ctx.progress(scene.frames.len() as u64, "mask");
+    let report = romo::segment_scene(&scene, &opts, &|stage, done, total| {
+        pb.set_message(stage.to_string());
+        pb.set_length(total as u64);
+        pb.set_position(done as u64);
+    })?;
+    pb.finish_and_clear();
+    let moving: f32 = report.frames.iter().map(|f| f.moving_fraction).sum::<f32>()
+        / report.frames.len().max(1) as f32;
+    ctx.info(format!(
+        "masks in {} ({} frames, {:.1}% moving on average, {} dropped from training)",
+        report
+            .masks_dir
+            .as_deref()
+            .map(|p| p.display().to_string())
+            .unwrap_or_default(),
+        report.frames.len(),
+        100.0 * moving,
+        report.dropped_frames.len()
+    ));
+    Ok(serde_json::to_value(&report)?)
+}
