@@ -9,10 +9,10 @@ pub mod colmap;
 pub mod error;
 pub mod io;
 pub mod masks;
+pub mod ply;
 pub mod scene;
 pub mod split;
 pub mod transforms;
-pub mod synth;
 
 pub use camera::{Camera, CameraModel, Intrinsics, Pose};
 pub use error::{LoaderError, Result};
