@@ -18,6 +18,7 @@ pub mod forward;
 pub mod kernel;
 pub mod loss;
 pub mod prefix_sum;
+pub mod profile;
 pub mod project;
 pub mod project_backward;
 pub mod radix_sort;
@@ -30,6 +31,7 @@ mod tests;
 
 pub use backend::GpuBackend;
 pub use context::{GpuContext, GpuOptions};
+pub use profile::profile_step;
 
 /// Errors of the GPU backend.
 #[derive(Debug, thiserror::Error)]

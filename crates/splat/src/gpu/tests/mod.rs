@@ -5,6 +5,7 @@
 mod backward;
 mod binning;
 mod forward;
+mod fuzz;
 mod reflection;
 mod scenes;
 mod train_step;
