@@ -9,8 +9,11 @@ use super::kernel::{BindingDecl, BindingKind, Kernel, KernelDecl, Recorder};
 use super::project::CameraUniforms;
 use super::{GpuContext, GpuError};
 
-/// Workgroup size (one tile).
-pub const WORKGROUP_SIZE: [u32; 2] = [16, 16];
+/// Workgroup size: one tile of 16×16 pixels, each invocation owning a
+/// column of `PIXELS_PER_THREAD` pixels.
+pub const WORKGROUP_SIZE: [u32; 2] = [16, 4];
+/// Vertically adjacent pixels per invocation (`PPT` in the shader).
+pub const PIXELS_PER_THREAD: u32 = 4;
 /// f32 per splat in the gradient buffer (the `ProjectedGrads` layout).
 pub const GRAD_STRIDE: u64 = 12;
 
