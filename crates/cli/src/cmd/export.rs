@@ -1,0 +1,167 @@
+//! `romosplat export --splats F --format ply|splat|glb|spz [--clean] [--scene DIR] --out FILE`:
+//! convert a trained splat file to the formats other tools read, optionally
+//! cleaning it first (see `splat::export::clean`).
+
+use crate::Ctx;
+use anyhow::Context;
+use splat::export::{self, CleanOptions, ExportFormat, ExportOptions, SceneGeometry};
+use std::path::{Path, PathBuf};
+
+/// Output format (`--format`).
+#[derive(Debug, Clone, Copy, PartialEq, Eq, clap::ValueEnum)]
+pub enum Format {
+    /// INRIA 3DGS PLY.
+    Ply,
+    /// antimatter15 `.splat` (32 bytes per splat, no SH beyond the colour).
+    Splat,
+    /// glTF binary with KHR_gaussian_splatting.
+    Glb,
+    /// Niantic SPZ (gzip).
+    Spz,
+}
+
+impl From<Format> for ExportFormat {
+    fn from(f: Format) -> Self {
+        match f {
+            Format::Ply => ExportFormat::Ply,
+            Format::Splat => ExportFormat::Splat,
+            Format::Glb => ExportFormat::Glb,
+            Format::Spz => ExportFormat::Spz,
+        }
+    }
+}
+
+/// `romosplat export`
+#[derive(Debug, clap::Args)]
+pub struct Args {
+    /// Input splats: .ply (INRIA layout), .spz or .splat.
+    #[arg(long)]
+    pub splats: PathBuf,
+    /// Output format; defaults to the extension of --out.
+    #[arg(long, value_enum)]
+    pub format: Option<Format>,
+    /// Output file (written atomically).
+    #[arg(long)]
+    pub out: PathBuf,
+    /// Remove near-transparent, unseen, oversized and out-of-bounds splats first.
+    #[arg(long)]
+    pub clean: bool,
+    /// Scene folder (or COLMAP model folder) whose cameras and points3D the
+    /// clean pass uses; without it the "unseen" test is skipped and the bounds
+    /// come from the splats.
+    #[arg(long)]
+    pub scene: Option<PathBuf>,
+    /// Clean: minimum opacity after the sigmoid (INRIA prune threshold).
+    #[arg(long, default_value_t = CleanOptions::default().min_opacity)]
+    pub min_opacity: f32,
+    /// Clean: remove splats whose largest σ exceeds this × the median.
+    #[arg(long, default_value_t = CleanOptions::default().max_scale_over_median)]
+    pub max_scale_over_median: f32,
+    /// Clean: remove splats whose largest σ exceeds this × the scene extent.
+    #[arg(long, default_value_t = CleanOptions::default().max_scale_extent_fraction)]
+    pub max_scale_extent_fraction: f32,
+    /// Clean: grow the robust (1st–99th percentile) box by this fraction per side.
+    #[arg(long, default_value_t = CleanOptions::default().bounds_margin)]
+    pub bounds_margin: f32,
+    /// SPZ: format version to write (2 or 3).
+    #[arg(long, default_value_t = 3)]
+    pub spz_version: u32,
+    /// Keep COLMAP's y-down axes in .glb/.spz instead of rotating to their y-up frame.
+    #[arg(long)]
+    pub keep_axes: bool,
+}
+
+/// Read splats from .ply, .spz or .splat (by extension).
+fn read_input(path: &Path) -> anyhow::Result<splat::Splats> {
+    let ext = path
+        .extension()
+        .and_then(|e| e.to_str())
+        .unwrap_or("")
+        .to_ascii_lowercase();
+    Ok(match ext.as_str() {
+        "spz" => export::read_spz(path, true)?.1,
+        "splat" => export::read_splat(path)?,
+        _ => splat::io::read_ply(path)?,
+    })
+}
+
+/// Training cameras and static points of `--scene`: a scene folder (poses
+/// from sparse/0 or transforms.json) or a bare COLMAP model folder.
+fn scene_geometry(dir: &Path) -> anyhow::Result<SceneGeometry> {
+    if loader::colmap::detect_format(dir).is_some() {
+        let model = loader::colmap::read_model(dir)?;
+        return Ok(SceneGeometry::from_colmap(&model));
+    }
+    let scene = loader::scene::Scene::load(dir, &loader::scene::SceneOptions::default())?;
+    let geo = SceneGeometry::from_scene(&scene);
+    if geo.cameras.is_empty() {
+        anyhow::bail!("{}: the scene has no posed training frames", dir.display());
+    }
+    Ok(geo)
+}
+
+/// Run `romosplat export`.
+pub fn run(args: &Args, ctx: &Ctx) -> anyhow::Result<serde_json::Value> {
+    let format: ExportFormat = match args.format {
+        Some(f) => f.into(),
+        None => ExportFormat::from_path(&args.out).with_context(|| {
+            format!(
+                "{}: cannot tell the format from the extension; pass --format",
+                args.out.display()
+            )
+        })?,
+    };
+    let mut splats = read_input(&args.splats)?;
+    ctx.info(format!(
+        "read {} splats (SH degree {}) from {}",
+        splats.len(),
+        splats.sh_degree,
+        args.splats.display()
+    ));
+    let mut clean_report = None;
+    if args.clean {
+        let opts = CleanOptions {
+            min_opacity: args.min_opacity,
+            max_scale_over_median: args.max_scale_over_median,
+            max_scale_extent_fraction: args.max_scale_extent_fraction,
+            bounds_margin: args.bounds_margin,
+            ..CleanOptions::default()
+        };
+        let scene = match &args.scene {
+            Some(dir) => scene_geometry(dir)?,
+            None => SceneGeometry::default(),
+        };
+        let (kept, rep) = export::clean(&splats, &scene, &opts)?;
+        ctx.info(format!(
+            "clean: kept {} of {}; removed {} transparent, {} unseen{}, {} oversized, {} outside bounds ({})",
+            rep.kept,
+            rep.input,
+            rep.removed_transparent,
+            rep.removed_unseen,
+            if rep.unseen_checked {
+                format!(" by {} cameras", rep.cameras)
+            } else {
+                " (skipped: no --scene)".into()
+            },
+            rep.removed_oversized,
+            rep.removed_outside_bounds,
+            rep.bounds_source
+        ));
+        splats = kept;
+        clean_report = Some(rep);
+    }
+    let mut opts = ExportOptions::default();
+    opts.spz.version = args.spz_version;
+    opts.spz.convert_axes = !args.keep_axes;
+    opts.glb.to_gltf_axes = !args.keep_axes;
+    let summary = export::export(&splats, format, &args.out, &opts)?;
+    ctx.info(format!(
+        "wrote {} splats as {} to {} ({} bytes, {:.1} bytes/splat)",
+        summary.splats,
+        format,
+        summary.path.display(),
+        summary.bytes,
+        summary.bytes as f64 / summary.splats.max(1) as f64
+    ));
+    Ok(serde_json::json!({ "export": summary, "clean": clean_report }))
+}
