@@ -189,6 +189,11 @@ impl SceneSpec {
             (1..=8).contains(&self.supersample),
             "supersample must be in 1..=8",
         )?;
+        let samples = (self.width as u64 * self.height as u64) * (self.supersample as u64).pow(2);
+        check(
+            samples <= 1 << 27,
+            "width × height × supersample² must be <= 134217728 samples (memory)",
+        )?;
         check(self.fps.is_finite() && self.fps > 0.0, "fps must be > 0")?;
         check(self.test_views <= 10_000, "test_views must be <= 10000")?;
         check(finite(&self.test_offset), "test_offset must be finite")?;
@@ -214,6 +219,14 @@ impl SceneSpec {
             c.jitter_hz.is_finite() && c.jitter_hz > 0.0,
             "camera.jitter_hz must be > 0",
         )?;
+        for i in 0..self.frames.max(2) {
+            let s = i as f64 / (self.frames.max(2) - 1) as f64;
+            let d = super::path::catmull_rom(&c.target, s) - super::path::catmull_rom(&c.eye, s);
+            check(
+                d.norm() > 1e-3,
+                &format!("camera: target and eye coincide at frame {i}"),
+            )?;
+        }
         let w = &self.world;
         check(
             w.length.is_finite() && w.length > 2.0,

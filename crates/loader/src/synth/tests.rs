@@ -355,6 +355,18 @@ fn bad_specs_are_rejected_with_the_file_name() {
     let mut s = SceneSpec::default();
     s.pedestrians[0].end = s.pedestrians[0].start;
     assert!(s.validate().is_err());
+    let mut s = SceneSpec::default();
+    s.camera.eye = vec![[1.0, 2.0, 1.5]];
+    s.camera.target = vec![[1.0, 2.0, 1.5]];
+    assert!(s.validate().unwrap_err().to_string().contains("coincide"));
+    let s = SceneSpec {
+        width: 8000,
+        height: 8000,
+        supersample: 8,
+        ..SceneSpec::default()
+    };
+    assert!(s.validate().is_err());
+    assert!(SceneSpec::default().validate().is_ok());
 }
 
 #[test]
