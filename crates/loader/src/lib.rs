@@ -12,6 +12,7 @@ pub mod masks;
 pub mod ply;
 pub mod scene;
 pub mod split;
+pub mod synth;
 pub mod transforms;
 
 pub use camera::{Camera, CameraModel, Intrinsics, Pose};
