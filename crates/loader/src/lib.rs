@@ -6,14 +6,18 @@
 
 pub mod camera;
 pub mod colmap;
+pub mod davis;
 pub mod error;
+pub mod exr;
+pub mod flo;
+pub mod inspect;
 pub mod io;
 pub mod masks;
 pub mod ply;
 pub mod scene;
 pub mod split;
-pub mod synth;
 pub mod transforms;
+pub mod video;
 
 pub use camera::{Camera, CameraModel, Intrinsics, Pose};
 pub use error::{LoaderError, Result};

@@ -1,0 +1,202 @@
+//! Video → frames through an `ffmpeg` subprocess: the scene's `images/`
+//! folder (`%05d.png`, sorted = capture order) from any video ffmpeg can
+//! decode, optionally resampled to a frame rate.
+
+use crate::error::{LoaderError, Result};
+use std::path::{Path, PathBuf};
+use std::process::Command;
+
+/// Frames are written as `out_dir/images/%05d.png`, numbered from 00001.
+pub const FRAME_PATTERN: &str = "%05d.png";
+
+/// Extract every frame (or `fps` frames per second) of `video` into
+/// `out_dir/images/`. Frames are decoded into a temp folder next to it and
+/// renamed into place when ffmpeg succeeds; an existing non-empty `images/`
+/// is an error (never overwritten). Returns the frame paths in order.
+pub fn extract_frames(
+    video: impl AsRef<Path>,
+    out_dir: impl AsRef<Path>,
+    fps: Option<f64>,
+) -> Result<Vec<PathBuf>> {
+    extract_frames_with("ffmpeg", video.as_ref(), out_dir.as_ref(), fps)
+}
+
+/// [`extract_frames`] with an explicit ffmpeg program (name or path).
+pub fn extract_frames_with(
+    program: &str,
+    video: &Path,
+    out_dir: &Path,
+    fps: Option<f64>,
+) -> Result<Vec<PathBuf>> {
+    if let Some(f) = fps
+        && !(f.is_finite() && f > 0.0)
+    {
+        return Err(LoaderError::Invalid(format!(
+            "fps must be a positive number, got {f}"
+        )));
+    }
+    if !video.is_file() {
+        return Err(LoaderError::Missing {
+            path: video.to_path_buf(),
+            context: "video".into(),
+        });
+    }
+    let images = out_dir.join("images");
+    if images.is_dir()
+        && std::fs::read_dir(&images)
+            .map(|mut d| d.next().is_some())
+            .unwrap_or(false)
+    {
+        return Err(LoaderError::format(
+            &images,
+            "already exists and is not empty; choose another --out",
+        ));
+    }
+    let tmp = out_dir.join(format!(".images.tmp.{}", std::process::id()));
+    std::fs::create_dir_all(&tmp).map_err(|e| LoaderError::io(&tmp, e))?;
+    let result = run_ffmpeg(program, video, &tmp, fps);
+    let result = result.and_then(|()| {
+        if images.is_dir() {
+            std::fs::remove_dir(&images).map_err(|e| LoaderError::io(&images, e))?;
+        }
+        std::fs::rename(&tmp, &images).map_err(|e| LoaderError::io(&images, e))?;
+        let mut v: Vec<PathBuf> = std::fs::read_dir(&images)
+            .map_err(|e| LoaderError::io(&images, e))?
+            .filter_map(|e| e.ok().map(|e| e.path()))
+            .filter(|p| p.extension().is_some_and(|e| e == "png"))
+            .collect();
+        v.sort();
+        if v.is_empty() {
+            return Err(LoaderError::format(video, "ffmpeg produced no frames"));
+        }
+        Ok(v)
+    });
+    if result.is_err() {
+        let _ = std::fs::remove_dir_all(&tmp);
+    }
+    result
+}
+
+fn run_ffmpeg(program: &str, video: &Path, out: &Path, fps: Option<f64>) -> Result<()> {
+    let mut cmd = Command::new(program);
+    cmd.args(["-hide_banner", "-loglevel", "error", "-nostdin", "-y", "-i"])
+        .arg(video);
+    if let Some(f) = fps {
+        cmd.arg("-vf").arg(format!("fps={f}"));
+    }
+    cmd.arg(out.join(FRAME_PATTERN));
+    let output = cmd.output().map_err(|e| {
+        if e.kind() == std::io::ErrorKind::NotFound {
+            LoaderError::External(format!(
+                "{program} not found on PATH; install it (Debian/Ubuntu: apt-get install -y ffmpeg)"
+            ))
+        } else {
+            LoaderError::External(format!("could not run {program}: {e}"))
+        }
+    })?;
+    if !output.status.success() {
+        let err = String::from_utf8_lossy(&output.stderr);
+        let lines: Vec<&str> = err.lines().filter(|l| !l.trim().is_empty()).collect();
+        let tail = lines[lines.len().saturating_sub(5)..].join(" | ");
+        return Err(LoaderError::External(format!(
+            "{program} failed on {} ({}): {tail}",
+            video.display(),
+            output.status
+        )));
+    }
+    Ok(())
+}
+
+/// True when `ffmpeg -version` runs.
+pub fn ffmpeg_available() -> bool {
+    Command::new("ffmpeg")
+        .arg("-version")
+        .output()
+        .is_ok_and(|o| o.status.success())
+}
+
+#[cfg(test)]
+mod tests {
+    #![allow(clippy::unwrap_used, clippy::expect_used)]
+    use super::*;
+
+    /// Skip only when ffmpeg is absent and `CI` is unset; under CI it must exist.
+    fn need_ffmpeg() -> bool {
+        if ffmpeg_available() {
+            return true;
+        }
+        assert!(
+            std::env::var_os("CI").is_none(),
+            "CI is set but ffmpeg is missing (apt-get install -y ffmpeg)"
+        );
+        eprintln!("skipping: ffmpeg not installed");
+        false
+    }
+
+    fn make_video(dir: &Path) -> PathBuf {
+        let v = dir.join("test.mkv");
+        let st = Command::new("ffmpeg")
+            .args([
+                "-hide_banner",
+                "-loglevel",
+                "error",
+                "-nostdin",
+                "-y",
+                "-f",
+                "lavfi",
+                "-i",
+            ])
+            .arg("testsrc=size=64x48:rate=10")
+            .args(["-t", "1", "-c:v", "ffv1"])
+            .arg(&v)
+            .status()
+            .unwrap();
+        assert!(st.success());
+        v
+    }
+
+    #[test]
+    fn extracts_all_frames_and_resampled() {
+        if !need_ffmpeg() {
+            return;
+        }
+        let dir = tempfile::tempdir().unwrap();
+        let v = make_video(dir.path());
+        let out = dir.path().join("all");
+        let frames = extract_frames(&v, &out, None).unwrap();
+        assert_eq!(frames.len(), 10);
+        assert_eq!(frames[0], out.join("images/00001.png"));
+        assert_eq!(image::image_dimensions(&frames[9]).unwrap(), (64, 48));
+        let frames = extract_frames(&v, dir.path().join("slow"), Some(5.0)).unwrap();
+        assert_eq!(frames.len(), 5);
+        // A second run into the same folder refuses to overwrite.
+        let e = extract_frames(&v, &out, None).unwrap_err().to_string();
+        assert!(e.contains("images") && e.contains("not empty"), "{e}");
+    }
+
+    #[test]
+    fn failures_are_explained() {
+        let dir = tempfile::tempdir().unwrap();
+        let v = dir.path().join("v.mp4");
+        std::fs::write(&v, b"this is not a video").unwrap();
+        let e = extract_frames_with("ffmpeg-definitely-missing", &v, dir.path(), None)
+            .unwrap_err()
+            .to_string();
+        assert!(e.contains("apt-get install -y ffmpeg"), "{e}");
+        let e = extract_frames(dir.path().join("none.mp4"), dir.path(), None)
+            .unwrap_err()
+            .to_string();
+        assert!(e.contains("none.mp4") && e.contains("not found"), "{e}");
+        assert!(extract_frames(&v, dir.path(), Some(0.0)).is_err());
+        if need_ffmpeg() {
+            let e = extract_frames(&v, dir.path().join("o"), None)
+                .unwrap_err()
+                .to_string();
+            assert!(
+                e.contains("ffmpeg failed") && e.contains("v.mp4") && e.contains("exit status"),
+                "{e}"
+            );
+            assert!(!dir.path().join("o/images").exists());
+        }
+    }
+}
