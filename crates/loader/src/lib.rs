@@ -16,6 +16,7 @@ pub mod masks;
 pub mod ply;
 pub mod scene;
 pub mod split;
+pub mod synth;
 pub mod transforms;
 pub mod video;
 
