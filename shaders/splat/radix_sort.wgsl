@@ -2,7 +2,7 @@
 // value) pairs on 4-bit digits. `count` builds per-block digit histograms
 // (digit-major, so an exclusive scan gives every block's output offset per
 // digit); `scatter` ranks each element among equal digits of its block
-// (packed 16-bit counters, Hillis–Steele scan) and writes it out. Stable, so
+// (per-digit bit masks + popcount) and writes it out. Stable, so
 // passes over increasing `shift` sort by the whole key.
 
 struct SortUniforms {
@@ -26,8 +26,8 @@ const SORT_WG: u32 = 256u;
 const RADIX: u32 = 16u;
 
 var<workgroup> hist: array<atomic<u32>, 16>;
-// 16 digits × 16-bit counters = 8 words per invocation.
-var<workgroup> packed: array<u32, 2048>;
+// Per digit, a 256-bit mask of the block's elements holding it (8 words).
+var<workgroup> masks: array<atomic<u32>, 128>;
 
 @compute @workgroup_size(256)
 fn count(@builtin(workgroup_id) wid: vec3<u32>, @builtin(num_workgroups) nwg: vec3<u32>,
@@ -61,30 +61,23 @@ fn scatter(@builtin(workgroup_id) wid: vec3<u32>, @builtin(num_workgroups) nwg: 
         value = values_in[i];
         d = (key >> u.shift) & u.digit_mask;
     }
-    for (var w = 0u; w < 8u; w++) {
-        packed[lid * 8u + w] = 0u;
-    }
-    if (d < RADIX) {
-        packed[lid * 8u + d / 2u] = 1u << (16u * (d % 2u));
+    if (lid < RADIX * 8u) {
+        atomicStore(&masks[lid], 0u);
     }
     workgroupBarrier();
-    for (var off = 1u; off < SORT_WG; off = off * 2u) {
-        var add: array<u32, 8>;
-        for (var w = 0u; w < 8u; w++) {
-            add[w] = 0u;
-            if (lid >= off) {
-                add[w] = packed[(lid - off) * 8u + w];
-            }
-        }
-        workgroupBarrier();
-        for (var w = 0u; w < 8u; w++) {
-            packed[lid * 8u + w] = packed[lid * 8u + w] + add[w];
-        }
-        workgroupBarrier();
+    let word = lid / 32u;
+    let bit = lid % 32u;
+    if (d < RADIX) {
+        atomicOr(&masks[d * 8u + word], 1u << bit);
     }
+    workgroupBarrier();
     if (d < RADIX && block < u.num_blocks) {
-        let inclusive = (packed[lid * 8u + d / 2u] >> (16u * (d % 2u))) & 0xffffu;
-        let dst = offsets[d * u.num_blocks + block] + inclusive - 1u;
+        // Rank among equal digits of this block = set bits below `lid`.
+        var rank = countOneBits(atomicLoad(&masks[d * 8u + word]) & ((1u << bit) - 1u));
+        for (var w = 0u; w < word; w++) {
+            rank += countOneBits(atomicLoad(&masks[d * 8u + w]));
+        }
+        let dst = offsets[d * u.num_blocks + block] + rank;
         keys_out[dst] = key;
         values_out[dst] = value;
     }
