@@ -36,18 +36,25 @@ impl FeatureMap {
             };
             data.extend(p.resize(w, h).data);
         }
-        FeatureMap { c: self.c, w, h, data }
+        FeatureMap {
+            c: self.c,
+            w,
+            h,
+            data,
+        }
     }
 
     /// Pixel-major copy (`h * w` rows of `c` values), the MLP's layout.
     pub fn pixel_major(&self) -> Vec<f32> {
         let n = self.w * self.h;
         let mut out = vec![0.0; n * self.c];
-        out.par_chunks_mut(self.c.max(1)).enumerate().for_each(|(i, row)| {
-            for (k, v) in row.iter_mut().enumerate() {
-                *v = self.data[k * n + i];
-            }
-        });
+        out.par_chunks_mut(self.c.max(1))
+            .enumerate()
+            .for_each(|(i, row)| {
+                for (k, v) in row.iter_mut().enumerate() {
+                    *v = self.data[k * n + i];
+                }
+            });
         out
     }
 

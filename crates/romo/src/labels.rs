@@ -27,9 +27,13 @@ pub struct LabelOptions {
     pub cycle_rel: f32,
     /// Absolute part of the cycle threshold in grid px (default 0.5 px).
     pub cycle_abs_px: f32,
-    /// U threshold factor on v (paper: 2).
+    /// U threshold factor on v (default 1.0; the paper's 2 assumes px²).
+    /// With S in px, 2·v left U empty on DAVIS (0.0% coverage, mean J
+    /// 0.17 on blackswan + car-roundabout); 1.0 gave U ≈ 7–15% and the best
+    /// J of {1.0, 1.5, 2.0} on four DAVIS sequences.
     pub u_factor: f32,
-    /// L threshold factor on v (paper: 0.01).
+    /// L threshold factor on v (default 0.05; the paper's 0.01 assumes
+    /// px²: with px it keeps ~0.5% of pixels, 0.05 keeps 40–55%).
     pub l_factor: f32,
     /// Frames whose inlier ratio is below this are not used to train the
     /// MLP (paper: 0.5). Inlier: residual below `inlier_sigmas`·σ̂ of the
@@ -47,8 +51,8 @@ impl Default for LabelOptions {
         Self {
             cycle_rel: 0.01,
             cycle_abs_px: 0.5,
-            u_factor: 2.0,
-            l_factor: 0.01,
+            u_factor: 1.0,
+            l_factor: 0.05,
             min_inlier_ratio: 0.5,
             fit_points: 2000,
             robust: RobustOptions::default(),
@@ -83,14 +87,21 @@ pub fn cycle_valid(f: &Flow, b: &Flow, o: &LabelOptions) -> Vec<bool> {
             }
             let (bu, bv) = b.sample(x2, y2);
             let (du, dv) = (u + bu, v + bv);
-            du * du + dv * dv < o.cycle_rel * (u * u + v * v + bu * bu + bv * bv) + o.cycle_abs_px * o.cycle_abs_px
+            du * du + dv * dv
+                < o.cycle_rel * (u * u + v * v + bu * bu + bv * bv)
+                    + o.cycle_abs_px * o.cycle_abs_px
         })
         .collect()
 }
 
 /// Fit one pair's model on correspondences `x ↔ x + f(x)` at pixels where
 /// `usable`, spread over a grid (`fit_points` cells, one random pixel each).
-pub fn fit_pair(f: &Flow, usable: &[bool], o: &LabelOptions, seed: u64) -> crate::Result<(TwoView, FitReport)> {
+pub fn fit_pair(
+    f: &Flow,
+    usable: &[bool],
+    o: &LabelOptions,
+    seed: u64,
+) -> crate::Result<(TwoView, FitReport)> {
     let (w, h) = (f.w(), f.h());
     let cell = ((w * h) as f64 / o.fit_points as f64).sqrt().max(1.0) as usize;
     let mut rng = rand_pcg::Pcg64::seed_from_u64(seed);
@@ -104,7 +115,10 @@ pub fn fit_pair(f: &Flow, usable: &[bool], o: &LabelOptions, seed: u64) -> crate
                 let i = y * w + x;
                 if usable[i] {
                     a.push([x as f64, y as f64]);
-                    b.push([(x as f32 + f.u.data[i]) as f64, (y as f32 + f.v.data[i]) as f64]);
+                    b.push([
+                        (x as f32 + f.u.data[i]) as f64,
+                        (y as f32 + f.v.data[i]) as f64,
+                    ]);
                     break;
                 }
             }

@@ -20,5 +20,7 @@ pub mod refine;
 pub mod scene;
 
 pub use error::{Result, RomoError};
-pub use pipeline::{FeatureBackend, FrameReport, FrameSource, RomoOptions, RomoReport, Segmentation, segment_frames};
+pub use pipeline::{
+    FeatureBackend, FrameReport, FrameSource, RomoOptions, RomoReport, Segmentation, segment_frames,
+};
 pub use scene::{segment_paths, segment_scene};

@@ -64,14 +64,20 @@ fn pngs(dir: &Path) -> Result<Vec<PathBuf>> {
 
 fn subdirs(dir: &Path) -> Vec<PathBuf> {
     let mut v: Vec<PathBuf> = std::fs::read_dir(dir)
-        .map(|rd| rd.filter_map(|e| e.ok().map(|e| e.path())).filter(|p| p.is_dir()).collect())
+        .map(|rd| {
+            rd.filter_map(|e| e.ok().map(|e| e.path()))
+                .filter(|p| p.is_dir())
+                .collect()
+        })
         .unwrap_or_default();
     v.sort();
     v
 }
 
 fn stem_of(p: &Path) -> String {
-    p.file_stem().map(|s| s.to_string_lossy().into_owned()).unwrap_or_default()
+    p.file_stem()
+        .map(|s| s.to_string_lossy().into_owned())
+        .unwrap_or_default()
 }
 
 /// Boolean "moving" map of a prediction, resized (nearest) to `w × h`.
@@ -82,7 +88,10 @@ fn read_moving(p: &Path, keep: bool, w: u32, h: u32) -> Result<Vec<bool>> {
     } else {
         image::imageops::resize(&m, w, h, image::imageops::FilterType::Nearest)
     };
-    Ok(m.as_raw().iter().map(|v| if keep { *v < 128 } else { *v >= 128 }).collect())
+    Ok(m.as_raw()
+        .iter()
+        .map(|v| if keep { *v < 128 } else { *v >= 128 })
+        .collect())
 }
 
 /// Evaluate one sequence: `gt` holds `<stem>.png`; `pred` holds predictions.
@@ -94,7 +103,10 @@ pub fn evaluate_sequence(pred: &Path, gt: &Path, name: &str) -> Result<SequenceM
     };
     let gts = pngs(gt)?;
     if gts.is_empty() {
-        return Err(RomoError::Input(format!("{}: no ground-truth PNGs", gt.display())));
+        return Err(RomoError::Input(format!(
+            "{}: no ground-truth PNGs",
+            gt.display()
+        )));
     }
     let preds = pngs(&pred)?;
     // Match GT stem "00000" to "00000.png" or "00000.<ext>.png".
@@ -103,7 +115,9 @@ pub fn evaluate_sequence(pred: &Path, gt: &Path, name: &str) -> Result<SequenceM
             let s = stem_of(p);
             if s == stem {
                 Some((p.clone(), false))
-            } else if Path::new(&s).file_stem().is_some_and(|x| x.to_string_lossy() == stem)
+            } else if Path::new(&s)
+                .file_stem()
+                .is_some_and(|x| x.to_string_lossy() == stem)
                 && Path::new(&s).extension().is_some()
             {
                 Some((p.clone(), true))
@@ -114,7 +128,9 @@ pub fn evaluate_sequence(pred: &Path, gt: &Path, name: &str) -> Result<SequenceM
     };
     let matched: Vec<(PathBuf, PathBuf, bool)> = gts
         .iter()
-        .filter_map(|g| find(&stem_of(g)).map(|(p, named_like_masks)| (g.clone(), p, named_like_masks)))
+        .filter_map(|g| {
+            find(&stem_of(g)).map(|(p, named_like_masks)| (g.clone(), p, named_like_masks))
+        })
         .collect();
     if matched.is_empty() {
         return Err(RomoError::Input(format!(
@@ -168,8 +184,16 @@ pub fn evaluate_sequence(pred: &Path, gt: &Path, name: &str) -> Result<SequenceM
         j_mean: mean(&js),
         j_recall: js.iter().filter(|j| **j > 0.5).count() as f64 / n as f64,
         j_decay: mean(&js[..q]) - mean(&js[n - q..]),
-        precision: if tp + fp == 0 { 1.0 } else { tp as f64 / (tp + fp) as f64 },
-        recall: if tp + fnn == 0 { 1.0 } else { tp as f64 / (tp + fnn) as f64 },
+        precision: if tp + fp == 0 {
+            1.0
+        } else {
+            tp as f64 / (tp + fp) as f64
+        },
+        recall: if tp + fnn == 0 {
+            1.0
+        } else {
+            tp as f64 / (tp + fnn) as f64
+        },
         j_per_frame: js,
         pred_convention: convention.into(),
     })
@@ -180,17 +204,26 @@ pub fn evaluate_sequence(pred: &Path, gt: &Path, name: &str) -> Result<SequenceM
 /// sub-folder with a same-named prediction folder is a sequence.
 pub fn evaluate_masks(pred_dir: &Path, gt_dir: &Path) -> Result<MaskMetrics> {
     if !gt_dir.is_dir() {
-        return Err(RomoError::Input(format!("{}: ground-truth folder not found", gt_dir.display())));
+        return Err(RomoError::Input(format!(
+            "{}: ground-truth folder not found",
+            gt_dir.display()
+        )));
     }
     if !pred_dir.is_dir() {
-        return Err(RomoError::Input(format!("{}: prediction folder not found", pred_dir.display())));
+        return Err(RomoError::Input(format!(
+            "{}: prediction folder not found",
+            pred_dir.display()
+        )));
     }
     let sequences = if !pngs(gt_dir)?.is_empty() {
         vec![evaluate_sequence(pred_dir, gt_dir, "")?]
     } else {
         let mut v = Vec::new();
         for g in subdirs(gt_dir) {
-            let name = g.file_name().map(|s| s.to_string_lossy().into_owned()).unwrap_or_default();
+            let name = g
+                .file_name()
+                .map(|s| s.to_string_lossy().into_owned())
+                .unwrap_or_default();
             let p = pred_dir.join(&name);
             if p.is_dir() {
                 v.push(evaluate_sequence(&p, &g, &name)?);
@@ -205,7 +238,9 @@ pub fn evaluate_masks(pred_dir: &Path, gt_dir: &Path) -> Result<MaskMetrics> {
         }
         v
     };
-    let m = |f: fn(&SequenceMetrics) -> f64| sequences.iter().map(f).sum::<f64>() / sequences.len() as f64;
+    let m = |f: fn(&SequenceMetrics) -> f64| {
+        sequences.iter().map(f).sum::<f64>() / sequences.len() as f64
+    };
     Ok(MaskMetrics {
         j_mean: m(|s| s.j_mean),
         j_recall: m(|s| s.j_recall),
@@ -225,7 +260,11 @@ mod tests {
     #[test]
     fn j_precision_recall_and_conventions() {
         let d = tempfile::tempdir().unwrap();
-        let (gt, pk, pm) = (d.path().join("gt"), d.path().join("pk"), d.path().join("pm"));
+        let (gt, pk, pm) = (
+            d.path().join("gt"),
+            d.path().join("pk"),
+            d.path().join("pm"),
+        );
         // GT: left half moving in frame 0, nothing moving in frame 1.
         let g0 = GrayImage::from_fn(10, 4, |x, _| image::Luma([if x < 5 { 255 } else { 0 }]));
         let g1 = GrayImage::new(10, 4);
@@ -233,7 +272,9 @@ mod tests {
         loader::io::write_png_gray8(gt.join("00001.png"), &g1).unwrap();
         // Prediction: moving x < 4 in frame 0 (IoU 16/20 = 0.8), empty in 1 (J = 1).
         let p0 = GrayImage::from_fn(10, 4, |x, _| image::Luma([if x < 4 { 255 } else { 0 }]));
-        let inv = |m: &GrayImage| GrayImage::from_fn(10, 4, |x, y| image::Luma([255 - m.get_pixel(x, y).0[0]]));
+        let inv = |m: &GrayImage| {
+            GrayImage::from_fn(10, 4, |x, y| image::Luma([255 - m.get_pixel(x, y).0[0]]))
+        };
         loader::io::write_png_gray8(pm.join("00000.png"), &p0).unwrap();
         loader::io::write_png_gray8(pm.join("00001.png"), &g1).unwrap();
         loader::io::write_png_gray8(pk.join("00000.jpg.png"), &inv(&p0)).unwrap();

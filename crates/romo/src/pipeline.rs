@@ -103,7 +103,10 @@ impl RomoOptions {
     /// The working grid for frames of `w × h`.
     pub fn grid_size(&self, w: usize, h: usize) -> (usize, usize) {
         let s = (self.grid_max_side as f64 / w.max(h) as f64).min(1.0);
-        (((w as f64 * s).round() as usize).max(8), ((h as f64 * s).round() as usize).max(8))
+        (
+            ((w as f64 * s).round() as usize).max(8),
+            ((h as f64 * s).round() as usize).max(8),
+        )
     }
 }
 
@@ -175,6 +178,8 @@ pub struct RomoReport {
     pub backends: Vec<String>,
     /// Where masks were written (scene driver).
     pub masks_dir: Option<PathBuf>,
+    /// split.json `extra` views given all-keep masks (not part of the video).
+    pub held_out_views: usize,
 }
 
 /// Low-resolution result of [`segment_frames`].
@@ -257,7 +262,12 @@ fn prepare(
     let (valid_f, valid_b): (Vec<Vec<bool>>, Vec<Vec<bool>>) = t.time("cycle", || {
         (0..n - 1)
             .into_par_iter()
-            .map(|p| (cycle_valid(&fwd[p], &bwd[p], &o.labels), cycle_valid(&bwd[p], &fwd[p], &o.labels)))
+            .map(|p| {
+                (
+                    cycle_valid(&fwd[p], &bwd[p], &o.labels),
+                    cycle_valid(&bwd[p], &fwd[p], &o.labels),
+                )
+            })
             .unzip()
     });
     progress("features", 0, n);
@@ -282,6 +292,9 @@ fn prepare(
     })
 }
 
+/// Labels of every frame and the fit of every pair in one round.
+type RoundLabels = (Vec<FrameLabels>, Vec<(TwoView, FitReport)>);
+
 /// Fit every pair (excluding pixels in `moving`, per frame) and label every
 /// frame.
 fn label_round(
@@ -289,13 +302,17 @@ fn label_round(
     moving: Option<&[Vec<bool>]>,
     o: &RomoOptions,
     round: usize,
-) -> Result<(Vec<FrameLabels>, Vec<(TwoView, FitReport)>)> {
+) -> Result<RoundLabels> {
     let np = pr.fwd.len();
     let fits: Vec<(TwoView, FitReport)> = (0..np)
         .into_par_iter()
         .map(|p| {
             let usable: Vec<bool> = match moving {
-                Some(m) => pr.valid_f[p].iter().zip(&m[p]).map(|(v, mv)| *v && !mv).collect(),
+                Some(m) => pr.valid_f[p]
+                    .iter()
+                    .zip(&m[p])
+                    .map(|(v, mv)| *v && !mv)
+                    .collect(),
                 None => pr.valid_f[p].clone(),
             };
             let seed = o.seed ^ ((round as u64) << 32) ^ p as u64;
@@ -336,7 +353,13 @@ fn label_round(
 
 /// Draw training samples: per kept frame up to `samples_per_frame`, half
 /// from U when it has that many.
-fn samples(pr: &Prepared, labels: &[FrameLabels], keep: &[bool], o: &RomoOptions, round: usize) -> (Vec<f32>, Vec<Label>) {
+fn samples(
+    pr: &Prepared,
+    labels: &[FrameLabels],
+    keep: &[bool],
+    o: &RomoOptions,
+    round: usize,
+) -> (Vec<f32>, Vec<Label>) {
     let c = pr.c;
     let mut rng = rand_pcg::Pcg64::seed_from_u64(o.seed ^ 0x5a5a ^ round as u64);
     let (mut x, mut y) = (Vec::new(), Vec::new());
@@ -392,7 +415,7 @@ pub fn segment_frames(
     let mut tm = Timer(&mut timings);
     let mut mlp = Mlp::new(pr.c, o.seed ^ 0x11);
     let mut probs: Vec<Vec<f32>> = Vec::new();
-    let mut last: Option<(Vec<FrameLabels>, Vec<(TwoView, FitReport)>)> = None;
+    let mut last: Option<RoundLabels> = None;
     for round in 0..o.iterations {
         progress("geometry", round, o.iterations);
         let moving: Option<Vec<Vec<bool>>> = (round > 0).then(|| {
@@ -401,14 +424,30 @@ pub fn segment_frames(
                 .map(|p| p.iter().map(|h| *h > o.refine.threshold).collect())
                 .collect()
         });
-        let (labels, fits) = tm.time("geometry", || label_round(&pr, moving.as_deref(), o, round))?;
-        let keep: Vec<bool> = labels.iter().map(|l| l.inlier_ratio >= o.labels.min_inlier_ratio).collect();
+        let (labels, fits) =
+            tm.time("geometry", || label_round(&pr, moving.as_deref(), o, round))?;
+        let keep: Vec<bool> = labels
+            .iter()
+            .map(|l| l.inlier_ratio >= o.labels.min_inlier_ratio)
+            .collect();
         // If every frame would be dropped, train on all rather than nothing.
-        let keep = if keep.iter().any(|k| *k) { keep } else { vec![true; n] };
+        let keep = if keep.iter().any(|k| *k) {
+            keep
+        } else {
+            vec![true; n]
+        };
         progress("mlp", round, o.iterations);
         let rep = tm.time("mlp", || {
             let (x, y) = samples(&pr, &labels, &keep, o, round);
-            train(&mut mlp, &x, &y, o.mlp.epochs_per_round, round == 0, &o.mlp, o.seed ^ round as u64)
+            train(
+                &mut mlp,
+                &x,
+                &y,
+                o.mlp.epochs_per_round,
+                round == 0,
+                &o.mlp,
+                o.seed ^ round as u64,
+            )
         });
         report.rounds.push(rep);
         probs = tm.time("mlp", || pr.feats.iter().map(|f| mlp.predict(f)).collect());
@@ -417,9 +456,15 @@ pub fn segment_frames(
     let (gw, gh) = report.grid;
     let planes: Vec<Plane> = probs
         .into_iter()
-        .map(|d| Plane { w: gw, h: gh, data: d })
+        .map(|d| Plane {
+            w: gw,
+            h: gh,
+            data: d,
+        })
         .collect();
-    let planes = tm.time("refine", || temporal_smooth(&planes, o.refine.temporal_weight));
+    let planes = tm.time("refine", || {
+        temporal_smooth(&planes, o.refine.temporal_weight)
+    });
     if let Some((labels, fits)) = last {
         for (t, l) in labels.iter().enumerate() {
             let dropped = l.inlier_ratio < o.labels.min_inlier_ratio;
@@ -436,7 +481,11 @@ pub fn segment_frames(
                 valid_ratio: l.valid_ratio,
                 v_px: l.v,
                 dropped,
-                moving_fraction: planes[t].data.iter().filter(|h| **h > o.refine.threshold).count() as f32
+                moving_fraction: planes[t]
+                    .data
+                    .iter()
+                    .filter(|h| **h > o.refine.threshold)
+                    .count() as f32
                     / (gw * gh) as f32,
             });
         }
@@ -445,5 +494,8 @@ pub fn segment_frames(
     for (k, v) in timings {
         *report.timings_ms.entry(k).or_default() += v;
     }
-    Ok(Segmentation { probs: planes, report })
+    Ok(Segmentation {
+        probs: planes,
+        report,
+    })
 }

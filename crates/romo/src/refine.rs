@@ -36,7 +36,9 @@ impl Default for RefineOptions {
 impl RefineOptions {
     /// Check the options.
     pub fn validate(&self) -> crate::Result<()> {
-        if !(0.0..=0.5).contains(&self.temporal_weight) || self.eps <= 0.0 || !(0.0..1.0).contains(&self.threshold)
+        if !(0.0..=0.5).contains(&self.temporal_weight)
+            || self.eps <= 0.0
+            || !(0.0..1.0).contains(&self.threshold)
         {
             return Err(crate::RomoError::Options(
                 "refine: temporal_weight in [0, 0.5], eps > 0, threshold in (0, 1) required".into(),
@@ -142,7 +144,9 @@ mod tests {
         // Guide: a sharp vertical edge at x = 20; input: a blurred step at
         // x = 17 (misaligned). Output should cross 0.5 close to x = 20.
         let g = Plane::from_fn(40, 20, |x, _| if x >= 20 { 1.0 } else { 0.0 });
-        let p = Plane::from_fn(40, 20, |x, _| 1.0 / (1.0 + (-(x as f32 - 17.0) / 2.0).exp()));
+        let p = Plane::from_fn(40, 20, |x, _| {
+            1.0 / (1.0 + (-(x as f32 - 17.0) / 2.0).exp())
+        });
         let q = guided_filter(&g, &p, 4, 1e-3);
         let row: Vec<f32> = (0..40).map(|x| q.at(x, 10)).collect();
         assert!(row[15] < 0.35 && row[24] > 0.9, "{row:?}");

@@ -33,14 +33,19 @@ impl FrameSource for PathSource {
     }
 }
 
-struct SceneSource<'a>(&'a loader::scene::Scene);
+/// A scene's video frames (indices into `scene.frames`).
+struct SceneSource<'a>(&'a loader::scene::Scene, Vec<usize>);
 
 impl FrameSource for SceneSource<'_> {
     fn len(&self) -> usize {
-        self.0.frames.len()
+        self.1.len()
     }
     fn frame(&self, i: usize) -> Result<Rgb> {
-        Ok(Rgb::from_image(&self.0.load_image(i)?))
+        let k = *self
+            .1
+            .get(i)
+            .ok_or_else(|| RomoError::Input(format!("frame {i} out of range")))?;
+        Ok(Rgb::from_image(&self.0.load_image(k)?))
     }
 }
 
@@ -49,7 +54,9 @@ pub fn make_extractor(o: &RomoOptions) -> Result<Box<dyn FeatureExtractor>> {
     match &o.features {
         FeatureBackend::Hand => Ok(Box::new(HandFeatures)),
         #[cfg(feature = "onnx")]
-        FeatureBackend::Onnx { model } => Ok(Box::new(crate::onnx::WithHand(crate::onnx::OnnxFeatures::load(model)?))),
+        FeatureBackend::Onnx { model } => Ok(Box::new(crate::onnx::WithHand(
+            crate::onnx::OnnxFeatures::load(model)?,
+        ))),
         #[cfg(not(feature = "onnx"))]
         FeatureBackend::Onnx { model } => Err(RomoError::Onnx(format!(
             "{}: this build has no ONNX support (rebuild with `--features romo/onnx`)",
@@ -59,14 +66,38 @@ pub fn make_extractor(o: &RomoOptions) -> Result<Box<dyn FeatureExtractor>> {
 }
 
 /// Run RoMo on a loaded scene; writes into `opts.out` or the scene folder.
+///
+/// The video is the scene's frames minus split.json's `extra` views: those
+/// are held-out clean test images (NeRF On-the-go convention), not part of
+/// the capture sequence, so they get all-keep masks.
 pub fn segment_scene(
     scene: &loader::scene::Scene,
     opts: &RomoOptions,
     progress: &dyn Fn(&str, usize, usize),
 ) -> Result<RomoReport> {
-    let names: Vec<String> = scene.frames.iter().map(|f| f.name.clone()).collect();
+    let extra = scene.split_indices("extra");
+    let video: Vec<usize> = (0..scene.frames.len())
+        .filter(|i| !extra.contains(i))
+        .collect();
+    let names: Vec<String> = video
+        .iter()
+        .map(|&i| scene.frames[i].name.clone())
+        .collect();
     let out = opts.out.clone().unwrap_or_else(|| scene.root.clone());
-    segment_source(&SceneSource(scene), &names, &out, opts, progress)
+    let mut report = segment_source(&SceneSource(scene, video), &names, &out, opts, progress)?;
+    for &i in &extra {
+        let (w, h) = (
+            scene.frames[i].intrinsics.width,
+            scene.frames[i].intrinsics.height,
+        );
+        let keep = image::GrayImage::from_pixel(w, h, image::Luma([255]));
+        loader::masks::write_mask(
+            loader::masks::mask_path(&out.join("masks"), &scene.frames[i].name),
+            &keep,
+        )?;
+    }
+    report.held_out_views = extra.len();
+    Ok(report)
 }
 
 /// Run RoMo on image files; `names[i]` names frame i's outputs.
@@ -103,25 +134,37 @@ fn segment_source(
     let masks_dir = out.join("masks");
     progress("write", 0, names.len());
     let t = Instant::now();
-    (0..names.len()).into_par_iter().try_for_each(|i| -> Result<()> {
-        let frame = src.frame(i)?;
-        let guide = frame.gray();
-        let prob = upsample_probability(&seg.probs[i], &guide, &opts.refine);
-        let keep = to_keep_mask(&prob, opts.refine.threshold);
-        loader::masks::write_mask(loader::masks::mask_path(&masks_dir, &names[i]), &keep)?;
-        if opts.overlays {
-            write_overlay(&out.join("motion").join(format!("{}.png", names[i])), &frame, &prob, opts)?;
-        }
-        if opts.save_probabilities {
-            let stem = Path::new(&names[i])
-                .file_stem()
-                .map(|s| s.to_string_lossy().into_owned())
-                .unwrap_or_else(|| names[i].clone());
-            write_exr(&out.join("probabilities").join(format!("{stem}.exr")), &prob)?;
-        }
-        Ok(())
-    })?;
-    report.timings_ms.insert("refine_write".into(), t.elapsed().as_secs_f64() * 1e3);
+    (0..names.len())
+        .into_par_iter()
+        .try_for_each(|i| -> Result<()> {
+            let frame = src.frame(i)?;
+            let guide = frame.gray();
+            let prob = upsample_probability(&seg.probs[i], &guide, &opts.refine);
+            let keep = to_keep_mask(&prob, opts.refine.threshold);
+            loader::masks::write_mask(loader::masks::mask_path(&masks_dir, &names[i]), &keep)?;
+            if opts.overlays {
+                write_overlay(
+                    &out.join("motion").join(format!("{}.png", names[i])),
+                    &frame,
+                    &prob,
+                    opts,
+                )?;
+            }
+            if opts.save_probabilities {
+                let stem = Path::new(&names[i])
+                    .file_stem()
+                    .map(|s| s.to_string_lossy().into_owned())
+                    .unwrap_or_else(|| names[i].clone());
+                write_exr(
+                    &out.join("probabilities").join(format!("{stem}.exr")),
+                    &prob,
+                )?;
+            }
+            Ok(())
+        })?;
+    report
+        .timings_ms
+        .insert("refine_write".into(), t.elapsed().as_secs_f64() * 1e3);
     progress("write", names.len(), names.len());
     report.masks_dir = Some(masks_dir);
     Ok(report)
