@@ -1,12 +1,21 @@
 //! One module per subcommand of the CLI contract in DESIGN.md.
 
 pub mod bench_mask;
+pub mod bench_train;
+pub mod demo;
 pub mod eval_masks;
 pub mod eval_poses;
+pub mod eval_views;
 pub mod export;
+pub mod frames;
+pub mod inspect;
 pub mod mask;
 pub mod pose;
+pub mod render;
+pub mod run;
 pub mod scene;
+pub mod train;
+pub mod train_common;
 
 use crate::Ctx;
 use clap::Subcommand;
@@ -14,15 +23,28 @@ use clap::Subcommand;
 /// Every subcommand.
 #[derive(Debug, Subcommand)]
 pub enum Command {
+    /// The whole pipeline on the built-in demo scene; prints a results table.
+    Demo(demo::Args),
+    /// The whole pipeline on a video or scene folder: frames → masks → poses → splats → export → report.
+    Run(run::Args),
     /// Built-in synthetic scenes (`scene generate scenes/X.toml --out DIR`).
     Scene(scene::Args),
     /// RoMo motion masks (`mask --scene DIR [--out DIR]`).
     Mask(mask::Args),
     /// Camera poses with COLMAP, ignoring moving pixels (`pose --scene DIR`).
     Pose(pose::Args),
+    /// Train Gaussian splats with masked loss
+    /// (`train --scene DIR [--no-masks] [--poses PATH] [--steps N] [--backend auto|wgpu|cpu] --out DIR`).
+    Train(train::Args),
+    /// Render a split of a scene from trained splats (`render --splats FILE --scene DIR [--split extra] --out DIR`).
+    Render(render::Args),
     /// Export splats as ply, splat, glb or spz, optionally cleaned
     /// (`export --splats F --format ply|splat|glb|spz [--clean] --out FILE`).
     Export(export::Args),
+    /// Extract a video's frames into a scene folder (`frames --video FILE --out DIR [--fps N]`).
+    Frames(frames::Args),
+    /// Summarise a scene folder, COLMAP model, transforms.json or PLY (`inspect PATH`).
+    Inspect(inspect::Args),
     /// Evaluate masks, poses or rendered views.
     #[command(subcommand)]
     Eval(EvalCommand),
@@ -38,6 +60,8 @@ pub enum EvalCommand {
     Masks(eval_masks::Args),
     /// ATE / RPE of predicted poses against ground truth.
     Poses(eval_poses::Args),
+    /// PSNR / SSIM of rendered views against the scene's images.
+    Views(eval_views::Args),
 }
 
 /// `romosplat bench ...`
@@ -45,22 +69,31 @@ pub enum EvalCommand {
 pub enum BenchCommand {
     /// Speed of the mask stage (per-stage medians, frames/s).
     Mask(bench_mask::Args),
+    /// Training speed of each backend (steps/s, MP/s).
+    Train(bench_train::Args),
 }
 
 /// Run one command and return its JSON summary.
 pub fn dispatch(cmd: &Command, ctx: &Ctx) -> anyhow::Result<serde_json::Value> {
-    let _ = ctx;
     match cmd {
+        Command::Demo(a) => demo::run(a, ctx),
+        Command::Run(a) => run::run(a, ctx),
         Command::Scene(a) => scene::run(a, ctx),
         Command::Mask(a) => mask::run(a, ctx),
         Command::Pose(a) => pose::run(a, ctx),
+        Command::Train(a) => train::run(a, ctx),
         Command::Export(a) => export::run(a, ctx),
+        Command::Frames(a) => frames::run(a, ctx),
+        Command::Inspect(a) => inspect::run(a, ctx),
+        Command::Render(a) => render::run(a, ctx),
         Command::Eval(e) => match e {
             EvalCommand::Masks(a) => eval_masks::run(a, ctx),
             EvalCommand::Poses(a) => eval_poses::run(a, ctx),
+            EvalCommand::Views(a) => eval_views::run(a, ctx),
         },
         Command::Bench(b) => match b {
             BenchCommand::Mask(a) => bench_mask::run(a, ctx),
+            BenchCommand::Train(a) => bench_train::run(a, ctx),
         },
     }
 }
