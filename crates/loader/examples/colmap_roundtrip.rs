@@ -6,7 +6,9 @@
 use loader::colmap::{read_model_binary, read_model_text, write_model_binary, write_model_text};
 
 fn main() -> Result<(), Box<dyn std::error::Error>> {
-    let dir = std::env::args().nth(1).ok_or("usage: colmap_roundtrip MODEL_DIR")?;
+    let dir = std::env::args()
+        .nth(1)
+        .ok_or("usage: colmap_roundtrip MODEL_DIR")?;
     let dir = std::path::Path::new(&dir);
     let model = read_model_binary(dir)?;
     let tmp = tempfile::tempdir()?;
@@ -19,7 +21,8 @@ fn main() -> Result<(), Box<dyn std::error::Error>> {
     }
     write_model_text(&model, tmp.path().join("txt"))?;
     let t = read_model_text(tmp.path().join("txt"))?;
-    let text_same = t.cameras == model.cameras && t.images == model.images && t.points3d == model.points3d;
+    let text_same =
+        t.cameras == model.cameras && t.images == model.images && t.points3d == model.points3d;
     println!(
         "{}",
         serde_json::json!({
@@ -27,5 +30,9 @@ fn main() -> Result<(), Box<dyn std::error::Error>> {
             "points3d": model.points3d.len(), "binary_byte_exact": same, "text_lossless": text_same
         })
     );
-    if same && text_same { Ok(()) } else { Err("round trip differs".into()) }
+    if same && text_same {
+        Ok(())
+    } else {
+        Err("round trip differs".into())
+    }
 }

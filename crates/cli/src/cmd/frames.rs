@@ -23,7 +23,11 @@ pub fn run(args: &Args, ctx: &Ctx) -> anyhow::Result<serde_json::Value> {
     ctx.info(format!("extracting frames of {} ...", args.video.display()));
     let frames = loader::video::extract_frames(&args.video, &args.out, args.fps)?;
     let images = args.out.join("images");
-    ctx.info(format!("{} frames written to {}", frames.len(), images.display()));
+    ctx.info(format!(
+        "{} frames written to {}",
+        frames.len(),
+        images.display()
+    ));
     Ok(serde_json::json!({
         "video": args.video,
         "images_dir": images,

@@ -25,11 +25,17 @@ pub fn run(args: &Args, ctx: &Ctx) -> anyhow::Result<serde_json::Value> {
         ctx.info(format!("  poses from: {src:?}"));
     }
     if let Some(n) = r.points3d {
-        let tl = r.mean_track_length.map(|t| format!(" (mean track length {t:.2})")).unwrap_or_default();
+        let tl = r
+            .mean_track_length
+            .map(|t| format!(" (mean track length {t:.2})"))
+            .unwrap_or_default();
         ctx.info(format!("  3D points: {n}{tl}"));
     }
     for s in &r.image_sizes {
-        ctx.info(format!("  image size {}x{}: {} images", s.width, s.height, s.count));
+        ctx.info(format!(
+            "  image size {}x{}: {} images",
+            s.width, s.height, s.count
+        ));
     }
     for c in &r.cameras {
         let p: Vec<String> = c.params.iter().map(|v| format!("{v:.6}")).collect();
@@ -54,7 +60,10 @@ pub fn run(args: &Args, ctx: &Ctx) -> anyhow::Result<serde_json::Value> {
         ctx.info(format!("  split: {}", parts.join(", ")));
     }
     if let Some(n) = r.splats {
-        ctx.info(format!("  splats: {n}, SH degree {}", r.sh_degree.unwrap_or(0)));
+        ctx.info(format!(
+            "  splats: {n}, SH degree {}",
+            r.sh_degree.unwrap_or(0)
+        ));
     }
     Ok(serde_json::to_value(&r)?)
 }
