@@ -121,6 +121,7 @@ pub(crate) fn name_file(path: &Path, e: SplatError) -> SplatError {
 #[derive(Debug, Clone, Copy, PartialEq, Eq, Serialize, Deserialize)]
 #[serde(rename_all = "lowercase")]
 pub enum ExportFormat {
+    Ply,
     Splat,
     Glb,
     Spz,
@@ -128,11 +129,17 @@ pub enum ExportFormat {
 
 impl ExportFormat {
     /// All formats.
-    pub const ALL: [ExportFormat; 3] = [ExportFormat::Splat, ExportFormat::Glb, ExportFormat::Spz];
+    pub const ALL: [ExportFormat; 4] = [
+        ExportFormat::Ply,
+        ExportFormat::Splat,
+        ExportFormat::Glb,
+        ExportFormat::Spz,
+    ];
 
     /// The lower-case name, also the usual file extension.
     pub fn name(self) -> &'static str {
         match self {
+            ExportFormat::Ply => "ply",
             ExportFormat::Splat => "splat",
             ExportFormat::Glb => "glb",
             ExportFormat::Spz => "spz",
@@ -153,7 +160,7 @@ impl std::str::FromStr for ExportFormat {
             .into_iter()
             .find(|f| f.name().eq_ignore_ascii_case(s))
             .ok_or_else(|| {
-                SplatError::Invalid(format!("unknown export format {s:?} (splat|glb|spz)"))
+                SplatError::Invalid(format!("unknown export format {s:?} (ply|splat|glb|spz)"))
             })
     }
 }
@@ -198,6 +205,11 @@ pub fn export(
 ) -> Result<ExportSummary> {
     opts.validate()?;
     let (bytes, sh_degree) = match format {
+        ExportFormat::Ply => {
+            let bytes = crate::io::encode_ply(s).map_err(|e| name_file(path, e))?;
+            loader::io::write_bytes_atomic(path, &bytes)?;
+            (bytes.len() as u64, s.sh_degree)
+        }
         ExportFormat::Splat => (write_splat(path, s)?, 0),
         ExportFormat::Glb => (write_glb(path, s, &opts.glb)?, s.sh_degree),
         ExportFormat::Spz => (write_spz(path, s, &opts.spz)?, s.sh_degree),

@@ -164,6 +164,8 @@ fn write_samples_of_every_format_and_read_them_back() {
     assert_eq!((h.num_points as usize, spz.sh_degree), (SAMPLE_SPLATS, 3));
     let glb = parse_glb(&std::fs::read(dir.join("sample.glb")).unwrap()).unwrap();
     assert_eq!(glb.json["accessors"][0]["count"], SAMPLE_SPLATS as u64);
+    let ply = crate::io::read_ply(dir.join("sample.ply")).unwrap();
+    assert_eq!(ply, s);
     // No temp files left behind by the atomic writes.
     let leftovers: Vec<_> = std::fs::read_dir(&dir)
         .unwrap()
