@@ -4,8 +4,11 @@ pub mod backend;
 pub mod error;
 pub mod export;
 pub mod gpu;
+pub mod init;
+pub mod io;
 pub mod metrics;
 pub mod reference;
+pub mod strategy;
 pub mod train;
 pub mod types;
 

@@ -1,0 +1,295 @@
+//! `romosplat train --scene DIR [--no-masks] [--poses PATH] [--steps N]
+//! [--backend auto|wgpu|cpu] --out DIR`: masked Gaussian-splatting training.
+//! Writes `DIR/splats.ply` (INRIA layout), `DIR/checkpoint.bin` and
+//! `DIR/summary.json`; progress on stderr; held-out views (split.json
+//! `extra`, or every Nth with `--holdout-every`) are scored at the end.
+
+use crate::Ctx;
+use anyhow::{Context, bail};
+use loader::{Scene, SceneOptions};
+use splat::backend::TrainBackend;
+use splat::io::{read_checkpoint, write_ply};
+use splat::reference::CpuBackend;
+use splat::train::data::{initial_splats, load_views, scene_extent};
+use splat::train::eval::evaluate;
+use splat::train::{InitMode, TrainData, TrainOptions, Trainer, fresh_start};
+use splat::types::RenderOptions;
+use std::path::{Path, PathBuf};
+
+/// Which training backend.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, clap::ValueEnum)]
+pub enum BackendKind {
+    /// wgpu when an adapter exists, else the CPU reference.
+    Auto,
+    /// wgpu (error when no adapter).
+    Wgpu,
+    /// CPU reference (rayon).
+    Cpu,
+}
+
+/// Initialisation (`--init`).
+#[derive(Debug, Clone, Copy, PartialEq, Eq, clap::ValueEnum)]
+pub enum InitKind {
+    Auto,
+    Points,
+    Random,
+}
+
+/// Make a backend; says which on stderr.
+pub fn make_backend(kind: BackendKind, ctx: &Ctx) -> anyhow::Result<Box<dyn TrainBackend>> {
+    let gpu = || splat::gpu::backend::GpuBackend::new(&splat::gpu::context::GpuOptions::default());
+    let b: Box<dyn TrainBackend> = match kind {
+        BackendKind::Cpu => Box::new(CpuBackend::new()),
+        BackendKind::Wgpu => Box::new(gpu().map_err(|e| anyhow::anyhow!("wgpu backend: {e}"))?),
+        BackendKind::Auto => match gpu() {
+            Ok(g) => Box::new(g),
+            Err(e) => {
+                ctx.info(format!(
+                    "no usable GPU adapter ({e}); using the CPU reference backend"
+                ));
+                Box::new(CpuBackend::new())
+            }
+        },
+    };
+    ctx.info(format!("backend: {}", b.name()));
+    Ok(b)
+}
+
+/// `romosplat train`
+#[derive(Debug, clap::Args)]
+pub struct Args {
+    /// Scene folder (images/, masks/, sparse/0 or transforms.json, split.json).
+    #[arg(long)]
+    pub scene: PathBuf,
+    /// Ignore masks/ (every pixel counts in the loss and in init filtering).
+    #[arg(long)]
+    pub no_masks: bool,
+    /// COLMAP model folder whose poses and points replace the scene's.
+    #[arg(long)]
+    pub poses: Option<PathBuf>,
+    /// Training steps (INRIA default 30000).
+    #[arg(long, default_value_t = 30_000)]
+    pub steps: u32,
+    #[arg(long, value_enum, default_value_t = BackendKind::Auto)]
+    pub backend: BackendKind,
+    /// Integer image downscale factor.
+    #[arg(long, default_value_t = 1)]
+    pub downscale: u32,
+    /// Hold out every Nth frame for testing when the scene has no split.json (0 = none).
+    #[arg(long, default_value_t = 0)]
+    pub holdout_every: usize,
+    /// D-SSIM weight λ (0.2; 0 disables SSIM).
+    #[arg(long, default_value_t = 0.2)]
+    pub ssim_weight: f32,
+    /// Highest SH degree (0..=3).
+    #[arg(long, default_value_t = 3)]
+    pub sh_degree: u32,
+    /// Cap on the number of splats.
+    #[arg(long, default_value_t = 3_000_000)]
+    pub max_splats: usize,
+    /// Initialisation source.
+    #[arg(long, value_enum, default_value_t = InitKind::Auto)]
+    pub init: InitKind,
+    /// Random background each step.
+    #[arg(long)]
+    pub random_background: bool,
+    /// Antialiased (Mip-Splatting) rendering.
+    #[arg(long)]
+    pub antialiased: bool,
+    /// Write a checkpoint every N steps (0 = only at the end).
+    #[arg(long, default_value_t = 0)]
+    pub checkpoint_every: u32,
+    /// Resume from this checkpoint.bin.
+    #[arg(long)]
+    pub resume: Option<PathBuf>,
+    /// Random seed.
+    #[arg(long, default_value_t = 42)]
+    pub seed: u64,
+    /// Output folder.
+    #[arg(long)]
+    pub out: PathBuf,
+}
+
+/// Replace frame poses (and the model used for init) with a COLMAP model's.
+pub fn apply_poses(scene: &mut Scene, path: &Path) -> anyhow::Result<()> {
+    let dir = loader::colmap::find_model_dir(path)
+        .with_context(|| format!("{}: no COLMAP model", path.display()))?;
+    let model = loader::colmap::read_model(&dir)?;
+    let mut matched = 0;
+    for f in &mut scene.frames {
+        f.pose = None;
+        if let Some(im) = model.image_by_name(&f.name) {
+            f.pose = Some(im.pose);
+            if let Some(cam) = model.cameras.get(&im.camera_id) {
+                f.intrinsics = cam
+                    .intrinsics()
+                    .scaled_to(f.intrinsics.width, f.intrinsics.height);
+            }
+            matched += 1;
+        }
+    }
+    if matched == 0 {
+        bail!(
+            "{}: no image of the model matches a scene frame",
+            dir.display()
+        );
+    }
+    scene.model = Some(model);
+    Ok(())
+}
+
+/// Train and test frame indices: split.json, else every Nth held out, else all train.
+pub fn split_views(scene: &Scene, holdout_every: usize) -> (Vec<usize>, Vec<usize>) {
+    let posed = |i: &usize| scene.frames[*i].pose.is_some();
+    if scene.split.is_some() {
+        let tr: Vec<usize> = scene
+            .split_indices("clutter")
+            .into_iter()
+            .filter(posed)
+            .collect();
+        let te: Vec<usize> = scene
+            .split_indices("extra")
+            .into_iter()
+            .filter(posed)
+            .collect();
+        return (tr, te);
+    }
+    let all: Vec<usize> = (0..scene.len()).filter(posed).collect();
+    if holdout_every > 0 {
+        let (te, tr): (Vec<usize>, Vec<usize>) = all.iter().partition(|&&i| i % holdout_every == 0);
+        (tr, te)
+    } else {
+        (all, Vec::new())
+    }
+}
+
+pub fn run(args: &Args, ctx: &Ctx) -> anyhow::Result<serde_json::Value> {
+    let mut scene = Scene::load(
+        &args.scene,
+        &SceneOptions {
+            downscale: args.downscale,
+        },
+    )?;
+    if let Some(p) = &args.poses {
+        apply_poses(&mut scene, p)?;
+    }
+    let opts = TrainOptions {
+        steps: args.steps,
+        ssim_weight: args.ssim_weight,
+        sh_degree: args.sh_degree,
+        random_background: args.random_background,
+        antialiased: args.antialiased,
+        use_masks: !args.no_masks,
+        checkpoint_every: args.checkpoint_every,
+        seed: args.seed,
+        init: match args.init {
+            InitKind::Auto => InitMode::Auto,
+            InitKind::Points => InitMode::Points,
+            InitKind::Random => InitMode::Random,
+        },
+        strategy: splat::strategy::DefaultStrategyOptions {
+            max_splats: args.max_splats,
+            ..Default::default()
+        },
+        ..Default::default()
+    };
+    opts.validate()?;
+    let (train_idx, test_idx) = split_views(&scene, args.holdout_every);
+    if train_idx.is_empty() {
+        bail!("{}: no posed training frames", args.scene.display());
+    }
+    ctx.info(format!(
+        "loading {} training and {} test views",
+        train_idx.len(),
+        test_idx.len()
+    ));
+    let views = load_views(&scene, &train_idx, opts.use_masks)?;
+    let masked = views.iter().filter(|v| v.mask.is_some()).count();
+    let cams: Vec<_> = views.iter().map(|v| v.camera).collect();
+    let extent = scene_extent(&cams);
+    let data = TrainData { views, extent };
+    let (start, init) = match &args.resume {
+        Some(p) => (read_checkpoint(p)?, None),
+        None => {
+            let (s, rep) = initial_splats(&scene, &cams, extent, &opts)?;
+            ctx.info(format!(
+                "init: {} splats from {} ({} points skipped as moving)",
+                rep.splats, rep.source, rep.skipped_moving
+            ));
+            (fresh_start(s), Some(rep))
+        }
+    };
+    std::fs::create_dir_all(&args.out)
+        .with_context(|| format!("creating {}", args.out.display()))?;
+    let mut backend = make_backend(args.backend, ctx)?;
+    let pb = ctx.progress(opts.steps as u64, "train");
+    pb.set_position(start.step as u64);
+    let mut trainer = Trainer {
+        backend: backend.as_mut(),
+        data: &data,
+        opts: opts.clone(),
+        checkpoint_dir: Some(args.out.clone()),
+    };
+    let every = (opts.steps / 100).max(1);
+    let mut history: Vec<serde_json::Value> = Vec::new();
+    let (end, rep) = trainer.run(start, &mut |p| {
+        if p.step.is_multiple_of(every) || p.step == p.steps {
+            history.push(serde_json::json!({"step": p.step, "loss": p.loss, "psnr": p.psnr, "splats": p.splats}));
+        }
+        pb.set_position(p.step as u64);
+        if p.step.is_multiple_of(10) || p.step == p.steps {
+            pb.set_message(format!(
+                "loss {:.4} psnr {:.2} splats {} {:.2} it/s",
+                p.loss, p.psnr, p.splats, p.steps_per_sec
+            ));
+        }
+    })?;
+    pb.finish_and_clear();
+    let ply = args.out.join("splats.ply");
+    write_ply(&ply, &end.splats)?;
+    ctx.info(format!(
+        "trained {} steps in {:.1} s ({:.2} steps/s), {} splats, train PSNR {:.2} → {}",
+        rep.steps - rep.start_step,
+        rep.seconds,
+        rep.steps_per_sec,
+        rep.splats,
+        rep.final_train_psnr,
+        ply.display()
+    ));
+    let mut test = serde_json::Value::Null;
+    if !test_idx.is_empty() {
+        let tviews = load_views(&scene, &test_idx, false)?;
+        let ropts = RenderOptions {
+            background: opts.background,
+            sh_degree: end.splats.sh_degree,
+            low_pass: opts.low_pass,
+            antialiased: opts.antialiased,
+        };
+        let (ev, _) = evaluate(backend.as_mut(), &end.splats, &tviews, &ropts)?;
+        ctx.info(format!(
+            "test views: PSNR {:.2} dB, SSIM {:.4} ({} views)",
+            ev.mean_psnr,
+            ev.mean_ssim,
+            ev.views.len()
+        ));
+        test = serde_json::to_value(&ev)?;
+    }
+    let summary = serde_json::json!({
+        "splats_ply": ply,
+        "checkpoint": args.out.join("checkpoint.bin"),
+        "backend": rep.backend,
+        "train_views": train_idx.len(),
+        "masked_views": masked,
+        "extent": extent,
+        "init": init,
+        "report": rep,
+        "test": test,
+        "history": history,
+        "options": opts,
+    });
+    loader::io::write_bytes_atomic(
+        args.out.join("summary.json"),
+        serde_json::to_string_pretty(&summary)?.as_bytes(),
+    )?;
+    Ok(summary)
+}

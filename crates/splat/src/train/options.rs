@@ -1,0 +1,165 @@
+//! Training options with INRIA 3DGS defaults (Kerbl et al. 2023,
+//! `arguments/__init__.py` `OptimizationParams`), each documented.
+
+use crate::backend::LearningRates;
+use crate::strategy::DefaultStrategyOptions;
+use serde::{Deserialize, Serialize};
+
+/// How to initialise the splats.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Serialize, Deserialize)]
+pub enum InitMode {
+    /// COLMAP points3D when the scene has them, else random.
+    Auto,
+    /// COLMAP points3D (error when missing).
+    Points,
+    /// Random inside the cameras' bounds.
+    Random,
+}
+
+/// Every knob of a training run.
+#[derive(Debug, Clone, Serialize, Deserialize, PartialEq)]
+pub struct TrainOptions {
+    /// Optimisation steps (INRIA: 30 000).
+    pub steps: u32,
+    /// Initial learning rate of the means, × scene extent (INRIA 1.6e-4).
+    pub lr_means_init: f32,
+    /// Final learning rate of the means, × scene extent (1.6e-6); the rate
+    /// decays log-linearly from init to final over `steps` (INRIA over
+    /// `position_lr_max_steps` = 30 000, its default run length).
+    pub lr_means_final: f32,
+    /// SH DC learning rate (`feature_lr`, 2.5e-3).
+    pub lr_sh_dc: f32,
+    /// Higher SH learning rate (`feature_lr / 20`, 1.25e-4).
+    pub lr_sh_rest: f32,
+    /// Opacity-logit learning rate (0.05).
+    pub lr_opacity: f32,
+    /// Log-scale learning rate (5e-3).
+    pub lr_scales: f32,
+    /// Quaternion learning rate (1e-3).
+    pub lr_rotations: f32,
+    /// Highest SH degree (3).
+    pub sh_degree: u32,
+    /// Steps between SH degree increments (1000).
+    pub sh_degree_every: u32,
+    /// D-SSIM weight λ (0.2; 0 disables SSIM as SLS does).
+    pub ssim_weight: f32,
+    /// Background colour behind the splats (black).
+    pub background: [f32; 3],
+    /// Draw a uniformly random background each step instead (INRIA
+    /// `--random_background`; off).
+    pub random_background: bool,
+    /// Mip-Splatting/gsplat antialiased rendering (off).
+    pub antialiased: bool,
+    /// Screen-space dilation (px², 0.3).
+    pub low_pass: f32,
+    /// Densification (INRIA adaptive density control).
+    pub strategy: DefaultStrategyOptions,
+    /// Initialisation source.
+    pub init: InitMode,
+    /// Splats drawn for random initialisation (INRIA synthetic: 100 000).
+    pub random_init_count: usize,
+    /// Skip COLMAP points with more than this fraction of their
+    /// observations on moving (masked) pixels (0.5).
+    pub init_max_moving_fraction: f32,
+    /// Use `masks/` in the loss (true; `--no-masks` sets false).
+    pub use_masks: bool,
+    /// Write a checkpoint every N steps (0 = only at the end).
+    pub checkpoint_every: u32,
+    /// Random seed (view order, split sampling, random init and background).
+    pub seed: u64,
+}
+
+impl Default for TrainOptions {
+    fn default() -> Self {
+        TrainOptions {
+            steps: 30_000,
+            lr_means_init: 1.6e-4,
+            lr_means_final: 1.6e-6,
+            lr_sh_dc: 2.5e-3,
+            lr_sh_rest: 2.5e-3 / 20.0,
+            lr_opacity: 0.05,
+            lr_scales: 5e-3,
+            lr_rotations: 1e-3,
+            sh_degree: 3,
+            sh_degree_every: 1000,
+            ssim_weight: 0.2,
+            background: [0.0; 3],
+            random_background: false,
+            antialiased: false,
+            low_pass: 0.3,
+            strategy: DefaultStrategyOptions::default(),
+            init: InitMode::Auto,
+            random_init_count: 100_000,
+            init_max_moving_fraction: 0.5,
+            use_masks: true,
+            checkpoint_every: 0,
+            seed: 42,
+        }
+    }
+}
+
+impl TrainOptions {
+    /// Check the options.
+    pub fn validate(&self) -> crate::Result<()> {
+        let bad = |m: String| Err(crate::SplatError::Invalid(format!("train options: {m}")));
+        let lrs = [
+            self.lr_means_init,
+            self.lr_means_final,
+            self.lr_sh_dc,
+            self.lr_sh_rest,
+            self.lr_opacity,
+            self.lr_scales,
+            self.lr_rotations,
+        ];
+        if lrs.iter().any(|v| !(v.is_finite() && *v >= 0.0)) {
+            return bad(format!("learning rates must be finite and >= 0: {lrs:?}"));
+        }
+        if self.lr_means_init > 0.0 && self.lr_means_final <= 0.0 {
+            return bad("lr_means_final must be > 0 for the log-linear decay".into());
+        }
+        if self.sh_degree > crate::types::MAX_SH_DEGREE {
+            return bad(format!("sh_degree {} > 3", self.sh_degree));
+        }
+        if self.sh_degree_every == 0 {
+            return bad("sh_degree_every must be > 0".into());
+        }
+        if !(0.0..=1.0).contains(&self.ssim_weight) {
+            return bad(format!("ssim_weight {} not in [0, 1]", self.ssim_weight));
+        }
+        if !(self.low_pass.is_finite() && self.low_pass >= 0.0) {
+            return bad("low_pass must be >= 0".into());
+        }
+        if !(0.0..=1.0).contains(&self.init_max_moving_fraction) {
+            return bad("init_max_moving_fraction not in [0, 1]".into());
+        }
+        self.strategy.validate()
+    }
+
+    /// Learning rates at (0-based) step `step` for a scene of `extent`.
+    pub fn learning_rates(&self, step: u32, extent: f32) -> LearningRates {
+        let t = if self.steps <= 1 {
+            0.0
+        } else {
+            (step as f64 / self.steps as f64).clamp(0.0, 1.0)
+        };
+        let means = if self.lr_means_init > 0.0 {
+            let (a, b) = (self.lr_means_init as f64, self.lr_means_final as f64);
+            (a.ln() * (1.0 - t) + b.ln() * t).exp() as f32
+        } else {
+            0.0
+        };
+        LearningRates {
+            means: means * extent,
+            sh_dc: self.lr_sh_dc,
+            sh_rest: self.lr_sh_rest,
+            opacity: self.lr_opacity,
+            scales: self.lr_scales,
+            rotations: self.lr_rotations,
+        }
+    }
+
+    /// Active SH degree at (0-based) step `step`: +1 every `sh_degree_every`.
+    pub fn active_sh_degree(&self, step: u32) -> u32 {
+        (step / self.sh_degree_every).min(self.sh_degree)
+    }
+}
