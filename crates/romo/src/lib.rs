@@ -14,6 +14,8 @@ pub mod geometry;
 pub mod labels;
 pub mod metrics;
 pub mod mlp;
+#[cfg(feature = "onnx")]
+pub mod onnx;
 pub mod pipeline;
 pub mod plane;
 pub mod refine;
