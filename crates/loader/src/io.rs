@@ -25,7 +25,7 @@ fn temp_path_for(path: &Path) -> PathBuf {
 }
 
 /// Write `path` atomically: `f` writes into a buffered temp file in the same
-/// directory, which is flushed, synced and renamed over `path`. Parent
+/// directory, which is flushed and renamed over `path`. Parent
 /// directories are created. On any error the temp file is removed and `path`
 /// is left untouched.
 ///
@@ -47,11 +47,13 @@ where
         let file = std::fs::File::create(&tmp).map_err(|e| LoaderError::io(path, e))?;
         let mut w = BufWriter::with_capacity(1 << 20, file);
         f(&mut w)?;
-        let file = w
-            .into_inner()
-            .map_err(|e| LoaderError::io(path, e.into_error()))?;
-        file.sync_all().map_err(|e| LoaderError::io(path, e))?;
-        drop(file);
+        // No fsync: the rename already guarantees that readers never see a
+        // half-written file if this process dies; fsync would only add
+        // durability against power loss, at a large cost per file.
+        drop(
+            w.into_inner()
+                .map_err(|e| LoaderError::io(path, e.into_error()))?,
+        );
         std::fs::rename(&tmp, path).map_err(|e| LoaderError::io(path, e))
     })();
     if result.is_err() {
