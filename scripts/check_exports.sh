@@ -38,7 +38,7 @@ export NODE_PATH="$root"
 st=(node "$root/@playcanvas/splat-transform/bin/cli.mjs")
 
 echo "== writing samples into $out" >&2
-ROMOSPLAT_EXPORT_SAMPLES="$out" cargo test -q -p splat --lib \
+ROMOSPLAT_EXPORT_SAMPLES="$out" cargo test --release -q -p splat --lib \
   export::tests::write_samples_of_every_format_and_read_them_back -- --exact >&2
 ls -l "$out"/sample.* >&2
 
