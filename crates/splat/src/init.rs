@@ -32,7 +32,11 @@ pub fn knn_mean_sq_dist(pts: &[[f32; 3]], k: usize) -> Vec<f32> {
     }
     let vol: f32 = (0..3).map(|a| (hi[a] - lo[a]).max(1e-6)).product();
     // About 2 points per cell.
-    let cell = (vol * 2.0 / n as f32).cbrt().max(1e-6);
+    let maxdim = (0..3).map(|a| hi[a] - lo[a]).fold(0.0f32, f32::max);
+    // Not finer than 1/256 of the largest side, so degenerate (flat or
+    // linear) point sets cannot make the shell search crawl.
+    let cell = (vol * 2.0 / n as f32).cbrt().max(maxdim / 256.0).max(1e-6);
+    let max_r = (maxdim / cell).ceil() as i64 + 1;
     let key =
         |p: &[f32; 3]| -> [i64; 3] { [0, 1, 2].map(|a| ((p[a] - lo[a]) / cell).floor() as i64) };
     let mut grid: HashMap<[i64; 3], Vec<u32>> = HashMap::new();
@@ -76,7 +80,10 @@ pub fn knn_mean_sq_dist(pts: &[[f32; 3]], k: usize) -> Vec<f32> {
                 }
                 // Everything within r·cell of p has been seen.
                 let reach = r as f32 * cell;
-                if (best.len() == k && best[k - 1] <= reach * reach) || best.len() == n - 1 {
+                if (best.len() == k && best[k - 1] <= reach * reach)
+                    || best.len() == n - 1
+                    || r > max_r
+                {
                     break;
                 }
                 r += 1;
