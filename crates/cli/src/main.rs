@@ -25,16 +25,26 @@ struct Cli {
 
 fn main() {
     let cli = Cli::parse();
-    let ctx = Ctx { json: cli.json, quiet: cli.quiet };
+    let ctx = Ctx {
+        json: cli.json,
+        quiet: cli.quiet,
+    };
     match cmd::dispatch(&cli.command, &ctx) {
         Ok(value) => {
             if ctx.json {
-                println!("{}", serde_json::to_string(&value).unwrap_or_else(|_| "{}".into()));
+                println!(
+                    "{}",
+                    serde_json::to_string(&value).unwrap_or_else(|_| "{}".into())
+                );
             }
         }
         Err(err) => {
             // One line: the chain of causes joined, no backtrace.
-            let msg = err.chain().map(|c| c.to_string()).collect::<Vec<_>>().join(": ");
+            let msg = err
+                .chain()
+                .map(|c| c.to_string())
+                .collect::<Vec<_>>()
+                .join(": ");
             if ctx.json {
                 println!("{}", serde_json::json!({ "error": msg }));
             }

@@ -73,11 +73,19 @@ pub fn is_fresh(outputs: &[PathBuf], inputs: &[PathBuf]) -> bool {
     let Some(out_t) = oldest_output(outputs) else {
         return false;
     };
-    inputs.iter().filter_map(|p| newest_mtime(p)).all(|t| t <= out_t)
+    inputs
+        .iter()
+        .filter_map(|p| newest_mtime(p))
+        .all(|t| t <= out_t)
 }
 
 /// Decide whether a stage runs: forced by `--from`, or stale.
-pub fn should_run(stage: Stage, from: Option<Stage>, outputs: &[PathBuf], inputs: &[PathBuf]) -> bool {
+pub fn should_run(
+    stage: Stage,
+    from: Option<Stage>,
+    outputs: &[PathBuf],
+    inputs: &[PathBuf],
+) -> bool {
     if from.is_some_and(|f| stage >= f) {
         return true;
     }
@@ -93,7 +101,12 @@ mod tests {
 
     fn touch(p: &Path, t: SystemTime) {
         std::fs::create_dir_all(p.parent().unwrap()).unwrap();
-        let f = File::options().create(true).truncate(false).write(true).open(p).unwrap();
+        let f = File::options()
+            .create(true)
+            .truncate(false)
+            .write(true)
+            .open(p)
+            .unwrap();
         f.set_modified(t).unwrap();
     }
 
@@ -105,12 +118,21 @@ mod tests {
         let out = d.path().join("masks/a.png.png");
         touch(&input, t0);
         // Missing output: stale.
-        assert!(!is_fresh(std::slice::from_ref(&out), std::slice::from_ref(&input)));
+        assert!(!is_fresh(
+            std::slice::from_ref(&out),
+            std::slice::from_ref(&input)
+        ));
         touch(&out, t0 + Duration::from_secs(10));
-        assert!(is_fresh(&[d.path().join("masks")], &[d.path().join("images")]));
+        assert!(is_fresh(
+            &[d.path().join("masks")],
+            &[d.path().join("images")]
+        ));
         // An input newer than the output makes it stale again.
         touch(&d.path().join("images/b.png"), t0 + Duration::from_secs(20));
-        assert!(!is_fresh(&[d.path().join("masks")], &[d.path().join("images")]));
+        assert!(!is_fresh(
+            &[d.path().join("masks")],
+            &[d.path().join("images")]
+        ));
         // An empty output folder is not an output.
         std::fs::create_dir_all(d.path().join("empty")).unwrap();
         assert!(!is_fresh(&[d.path().join("empty")], &[]));

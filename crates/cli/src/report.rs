@@ -57,16 +57,9 @@ pub struct Report {
 /// Encode an RGB8 image as PNG bytes.
 pub fn png_rgb8(img: &image::RgbImage) -> Result<Vec<u8>> {
     let mut buf = std::io::Cursor::new(Vec::new());
-    img.write_to(&mut buf, image::ImageFormat::Png).context("encoding PNG")?;
+    img.write_to(&mut buf, image::ImageFormat::Png)
+        .context("encoding PNG")?;
     Ok(buf.into_inner())
-}
-
-/// Convert an f32 RGB image in [0, 1] to 8 bits.
-pub fn to_rgb8(img: &image::Rgb32FImage) -> image::RgbImage {
-    image::RgbImage::from_fn(img.width(), img.height(), |x, y| {
-        let p = img.get_pixel(x, y);
-        image::Rgb([0, 1, 2].map(|c| (p[c].clamp(0.0, 1.0) * 255.0).round() as u8))
-    })
 }
 
 /// Tint the pixels a mask marks as moving (mask value < 128 in the masks/
@@ -91,12 +84,17 @@ pub fn thumbnail(img: &image::RgbImage, max_w: u32) -> image::RgbImage {
     if img.width() <= max_w {
         return img.clone();
     }
-    let h = ((img.height() as f64) * max_w as f64 / img.width() as f64).round().max(1.0) as u32;
+    let h = ((img.height() as f64) * max_w as f64 / img.width() as f64)
+        .round()
+        .max(1.0) as u32;
     image::imageops::resize(img, max_w, h, image::imageops::FilterType::Triangle)
 }
 
 fn escape(s: &str) -> String {
-    s.replace('&', "&amp;").replace('<', "&lt;").replace('>', "&gt;").replace('"', "&quot;")
+    s.replace('&', "&amp;")
+        .replace('<', "&lt;")
+        .replace('>', "&gt;")
+        .replace('"', "&quot;")
 }
 
 /// Draw a chart as an SVG string.
@@ -104,8 +102,13 @@ pub fn chart_svg(chart: &Chart) -> Result<String> {
     let mut svg = String::new();
     {
         let root = SVGBackend::with_string(&mut svg, (640, 320)).into_drawing_area();
-        root.fill(&WHITE).map_err(|e| anyhow::anyhow!("chart: {e}"))?;
-        let pts = chart.series.iter().flat_map(|s| s.points.iter()).filter(|(x, y)| x.is_finite() && y.is_finite());
+        root.fill(&WHITE)
+            .map_err(|e| anyhow::anyhow!("chart: {e}"))?;
+        let pts = chart
+            .series
+            .iter()
+            .flat_map(|s| s.points.iter())
+            .filter(|(x, y)| x.is_finite() && y.is_finite());
         let (mut x0, mut x1, mut y0, mut y1) = (f64::MAX, f64::MIN, f64::MAX, f64::MIN);
         for (x, y) in pts {
             x0 = x0.min(*x);
@@ -135,12 +138,17 @@ pub fn chart_svg(chart: &Chart) -> Result<String> {
         for (i, s) in chart.series.iter().enumerate() {
             let color = Palette99::pick(i).to_rgba();
             cc.draw_series(LineSeries::new(
-                s.points.iter().copied().filter(|(x, y)| x.is_finite() && y.is_finite()),
+                s.points
+                    .iter()
+                    .copied()
+                    .filter(|(x, y)| x.is_finite() && y.is_finite()),
                 color.stroke_width(2),
             ))
             .map_err(|e| anyhow::anyhow!("chart: {e}"))?
             .label(s.name.clone())
-            .legend(move |(x, y)| PathElement::new(vec![(x, y), (x + 18, y)], color.stroke_width(2)));
+            .legend(move |(x, y)| {
+                PathElement::new(vec![(x, y), (x + 18, y)], color.stroke_width(2))
+            });
         }
         if chart.series.len() > 1 {
             cc.configure_series_labels()
@@ -185,7 +193,11 @@ figure img{{max-width:320px;display:block}}figcaption{{font-size:12px}}.row{{dis
             let _ = write!(h, "<tr><th>total</th><th>{total:.1}</th></tr></table>");
         }
         for t in &self.tables {
-            let _ = write!(h, "<h2>{}</h2><table class=\"metrics\"><tr>", escape(&t.caption));
+            let _ = write!(
+                h,
+                "<h2>{}</h2><table class=\"metrics\"><tr>",
+                escape(&t.caption)
+            );
             for c in &t.header {
                 let _ = write!(h, "<th>{}</th>", escape(c));
             }
@@ -207,7 +219,9 @@ figure img{{max-width:320px;display:block}}figcaption{{font-size:12px}}.row{{dis
             h.push_str("</div>");
         }
         if !self.contact_sheet.is_empty() {
-            h.push_str("<h2>Frames and motion masks (red = moving)</h2><div class=\"row\" id=\"contact\">");
+            h.push_str(
+                "<h2>Frames and motion masks (red = moving)</h2><div class=\"row\" id=\"contact\">",
+            );
             for f in &self.contact_sheet {
                 h.push_str(&figure_html(f));
             }
@@ -231,7 +245,8 @@ figure img{{max-width:320px;display:block}}figcaption{{font-size:12px}}.row{{dis
     pub fn write(&self, path: &Path) -> Result<()> {
         let html = self.to_html()?;
         loader::io::write_atomic(path, |w| {
-            w.write_all(html.as_bytes()).map_err(|e| loader::LoaderError::io(path, e))
+            w.write_all(html.as_bytes())
+                .map_err(|e| loader::LoaderError::io(path, e))
         })
         .with_context(|| format!("writing report {}", path.display()))
     }
@@ -253,14 +268,24 @@ mod tests {
         let r = Report {
             title: "a <b> & c".into(),
             timings: vec![("mask".into(), 1.5), ("train".into(), 2.0)],
-            tables: vec![Table { caption: "t".into(), header: vec!["x".into()], rows: vec![vec!["1".into()]] }],
+            tables: vec![Table {
+                caption: "t".into(),
+                header: vec!["x".into()],
+                rows: vec![vec!["1".into()]],
+            }],
             charts: vec![Chart {
                 title: "loss".into(),
                 x_label: "step".into(),
                 y_label: "L1".into(),
-                series: vec![Series { name: "a".into(), points: vec![(0.0, 1.0), (1.0, 0.5), (2.0, f64::NAN)] }],
+                series: vec![Series {
+                    name: "a".into(),
+                    points: vec![(0.0, 1.0), (1.0, 0.5), (2.0, f64::NAN)],
+                }],
             }],
-            contact_sheet: vec![Figure { caption: "f".into(), png: png_rgb8(&over).unwrap() }],
+            contact_sheet: vec![Figure {
+                caption: "f".into(),
+                png: png_rgb8(&over).unwrap(),
+            }],
             renders: vec![],
         };
         let html = r.to_html().unwrap();

@@ -54,7 +54,8 @@ fn link(src: &Path, dst: &Path) -> Result<()> {
             std::fs::remove_file(dst)?;
         }
     }
-    let src = std::fs::canonicalize(src).with_context(|| format!("{}: not found", src.display()))?;
+    let src =
+        std::fs::canonicalize(src).with_context(|| format!("{}: not found", src.display()))?;
     std::os::unix::fs::symlink(&src, dst).with_context(|| format!("linking {}", dst.display()))
 }
 
@@ -67,10 +68,21 @@ fn fresh_dir(p: &Path) -> Result<()> {
 
 /// Names of the training (clutter) and test (extra) frames of a scene.
 fn split_names(scene: &loader::scene::Scene) -> Result<(Vec<String>, Vec<String>)> {
-    let train: Vec<String> = scene.split_indices("clutter").iter().map(|&i| scene.frames[i].name.clone()).collect();
-    let test: Vec<String> = scene.split_indices("extra").iter().map(|&i| scene.frames[i].name.clone()).collect();
+    let train: Vec<String> = scene
+        .split_indices("clutter")
+        .iter()
+        .map(|&i| scene.frames[i].name.clone())
+        .collect();
+    let test: Vec<String> = scene
+        .split_indices("extra")
+        .iter()
+        .map(|&i| scene.frames[i].name.clone())
+        .collect();
     if train.is_empty() || test.is_empty() {
-        bail!("{}: the demo scene needs a split.json with clutter and extra views", scene.root.display());
+        bail!(
+            "{}: the demo scene needs a split.json with clutter and extra views",
+            scene.root.display()
+        );
     }
     Ok((train, test))
 }
@@ -85,23 +97,38 @@ fn make_video_dir(scene_dir: &Path, video: &Path, train: &[String]) -> Result<()
     fresh_dir(&video.join("images"))?;
     fresh_dir(&video.join("gt_motion"))?;
     for n in train {
-        link(&scene_dir.join("images").join(n), &video.join("images").join(n))?;
+        link(
+            &scene_dir.join("images").join(n),
+            &video.join("images").join(n),
+        )?;
         let gt = format!("{}.png", stem(n));
-        link(&scene_dir.join("gt_motion").join(&gt), &video.join("gt_motion").join(&gt))?;
+        link(
+            &scene_dir.join("gt_motion").join(&gt),
+            &video.join("gt_motion").join(&gt),
+        )?;
     }
     Ok(())
 }
 
 /// A training variant folder: all frames (training ones from `train_src`),
 /// the ground-truth model and split, and `masks` when given.
-fn make_variant_dir(scene_dir: &Path, dir: &Path, train_src: &Path, masks: Option<&Path>, names: (&[String], &[String])) -> Result<()> {
+fn make_variant_dir(
+    scene_dir: &Path,
+    dir: &Path,
+    train_src: &Path,
+    masks: Option<&Path>,
+    names: (&[String], &[String]),
+) -> Result<()> {
     fresh_dir(dir)?;
     std::fs::create_dir_all(dir.join("images"))?;
     for n in names.0 {
         link(&train_src.join(n), &dir.join("images").join(n))?;
     }
     for n in names.1 {
-        link(&scene_dir.join("images").join(n), &dir.join("images").join(n))?;
+        link(
+            &scene_dir.join("images").join(n),
+            &dir.join("images").join(n),
+        )?;
     }
     std::fs::create_dir_all(dir.join("sparse"))?;
     link(&scene_dir.join("sparse/0"), &dir.join("sparse/0"))?;
@@ -120,7 +147,13 @@ struct PoseRow {
     rpe_rot: Option<f64>,
 }
 
-fn run_pose(ctx: &Ctx, video: &Path, work: &Path, masks: Option<&Path>, gt: &[pose::NamedPose]) -> Result<(serde_json::Value, PoseRow, f64)> {
+fn run_pose(
+    ctx: &Ctx,
+    video: &Path,
+    work: &Path,
+    masks: Option<&Path>,
+    gt: &[pose::NamedPose],
+) -> Result<(serde_json::Value, PoseRow, f64)> {
     let t0 = Instant::now();
     let paths = pose::ColmapPaths {
         scene: video.to_path_buf(),
@@ -136,13 +169,26 @@ fn run_pose(ctx: &Ctx, video: &Path, work: &Path, masks: Option<&Path>, gt: &[po
         undistort: false,
         ..Default::default()
     };
-    let label = if masks.is_some() { "masked" } else { "unmasked" };
+    let label = if masks.is_some() {
+        "masked"
+    } else {
+        "unmasked"
+    };
     let report = match pose::run_colmap(&paths, &opts, &mut |_| {}) {
         Ok(r) => r,
         Err(e) => {
             ctx.info(format!("  COLMAP {label}: failed: {e}"));
-            let row = PoseRow { label: String::new(), registered: format!("0/{}", gt.len()), ate: None, rpe_rot: None };
-            return Ok((json!({ "error": e.to_string() }), row, t0.elapsed().as_secs_f64()));
+            let row = PoseRow {
+                label: String::new(),
+                registered: format!("0/{}", gt.len()),
+                ate: None,
+                rpe_rot: None,
+            };
+            return Ok((
+                json!({ "error": e.to_string() }),
+                row,
+                t0.elapsed().as_secs_f64(),
+            ));
         }
     };
     let pred = pose::trajectory::from_colmap(&paths.out)?;
@@ -153,7 +199,11 @@ fn run_pose(ctx: &Ctx, video: &Path, work: &Path, masks: Option<&Path>, gt: &[po
         ate: Some(metrics.ate.rmse),
         rpe_rot: metrics.rpe_rot_deg.as_ref().map(|s| s.rmse),
     };
-    Ok((json!({ "colmap": report, "metrics": metrics }), row, t0.elapsed().as_secs_f64()))
+    Ok((
+        json!({ "colmap": report, "metrics": metrics }),
+        row,
+        t0.elapsed().as_secs_f64(),
+    ))
 }
 
 /// Run the demo.
@@ -175,7 +225,11 @@ pub fn run(args: &Args, ctx: &Ctx) -> Result<serde_json::Value> {
         Err(_) => true,
     };
     if regenerate {
-        ctx.info(format!("[1/5] generating the '{}' scene into {}", spec.name, scene_dir.display()));
+        ctx.info(format!(
+            "[1/5] generating the '{}' scene into {}",
+            spec.name,
+            scene_dir.display()
+        ));
         if scene_dir.exists() {
             std::fs::remove_dir_all(&scene_dir)?;
         }
@@ -183,7 +237,11 @@ pub fn run(args: &Args, ctx: &Ctx) -> Result<serde_json::Value> {
         std::fs::write(scene_dir.join(".spec.toml"), spec_text)?;
         summary.insert("scene".into(), serde_json::to_value(&rep)?);
     } else {
-        ctx.info(format!("[1/5] scene '{}' already generated in {}", spec.name, scene_dir.display()));
+        ctx.info(format!(
+            "[1/5] scene '{}' already generated in {}",
+            spec.name,
+            scene_dir.display()
+        ));
     }
     timings.push(("generate scene".into(), t0.elapsed().as_secs_f64()));
     let scene = loader::scene::Scene::load(&scene_dir, &Default::default())?;
@@ -195,7 +253,10 @@ pub fn run(args: &Args, ctx: &Ctx) -> Result<serde_json::Value> {
     let t0 = Instant::now();
     ctx.info(format!("[2/5] RoMo motion masks on {} frames", train.len()));
     let video_scene = loader::scene::Scene::load(&video, &Default::default())?;
-    let romo_opts = romo::RomoOptions { overlays: true, ..Default::default() };
+    let romo_opts = romo::RomoOptions {
+        overlays: true,
+        ..Default::default()
+    };
     let pb = ctx.progress(train.len() as u64, "mask");
     let romo_report = romo::segment_scene(&video_scene, &romo_opts, &|stage, i, n| {
         pb.set_length(n as u64);
@@ -203,7 +264,8 @@ pub fn run(args: &Args, ctx: &Ctx) -> Result<serde_json::Value> {
         pb.set_message(stage.to_string());
     })?;
     pb.finish_and_clear();
-    let mask_metrics = romo::metrics::evaluate_masks(&video.join("masks"), &video.join("gt_motion"))?;
+    let mask_metrics =
+        romo::metrics::evaluate_masks(&video.join("masks"), &video.join("gt_motion"))?;
     timings.push(("RoMo masks".into(), t0.elapsed().as_secs_f64()));
     ctx.info(format!(
         "      J = {:.3}, precision {:.3}, recall {:.3} ({:.1} s)",
@@ -216,7 +278,11 @@ pub fn run(args: &Args, ctx: &Ctx) -> Result<serde_json::Value> {
     summary.insert("mask_metrics".into(), serde_json::to_value(&mask_metrics)?);
     let gt_masks = out.join("gt_masks");
     fresh_dir(&gt_masks)?;
-    pose::gt_masks::masks_from_gt_motion(&video.join("images"), &video.join("gt_motion"), &gt_masks)?;
+    pose::gt_masks::masks_from_gt_motion(
+        &video.join("images"),
+        &video.join("gt_motion"),
+        &gt_masks,
+    )?;
 
     // 3. COLMAP: unmasked, RoMo masks, ground-truth masks.
     let mut pose_rows = Vec::new();
@@ -224,10 +290,11 @@ pub fn run(args: &Args, ctx: &Ctx) -> Result<serde_json::Value> {
         ctx.info("[3/5] COLMAP skipped (--no-pose)");
     } else {
         let t0 = Instant::now();
-        let gt_traj: Vec<pose::NamedPose> = pose::trajectory::from_colmap(&scene_dir.join("sparse/0"))?
-            .into_iter()
-            .filter(|p| train.iter().any(|n| n == &p.name))
-            .collect();
+        let gt_traj: Vec<pose::NamedPose> =
+            pose::trajectory::from_colmap(&scene_dir.join("sparse/0"))?
+                .into_iter()
+                .filter(|p| train.iter().any(|n| n == &p.name))
+                .collect();
         let mut pose_json = serde_json::Map::new();
         let runs: [(&str, &str, Option<PathBuf>); 3] = [
             ("nomask", "no masks", None),
@@ -236,7 +303,13 @@ pub fn run(args: &Args, ctx: &Ctx) -> Result<serde_json::Value> {
         ];
         for (key, label, masks) in runs {
             ctx.info(format!("[3/5] COLMAP with {label}"));
-            let (j, mut row, secs) = run_pose(ctx, &video, &out.join("pose").join(key), masks.as_deref(), &gt_traj)?;
+            let (j, mut row, secs) = run_pose(
+                ctx,
+                &video,
+                &out.join("pose").join(key),
+                masks.as_deref(),
+                &gt_traj,
+            )?;
             row.label = label.to_string();
             ctx.info(format!(
                 "      registered {}, ATE {} ({secs:.1} s)",
@@ -264,10 +337,29 @@ pub fn run(args: &Args, ctx: &Ctx) -> Result<serde_json::Value> {
             _ => (scene_dir.join("clean"), None),
         };
         make_variant_dir(&scene_dir, &dir, &src, masks.as_deref(), names)?;
-        ctx.info(format!("[4/5] training {label} ({steps} steps, variant {}/4)", i + 1));
-        let extra: Vec<String> = if masks.is_none() { vec!["--no-masks".into()] } else { vec![] };
-        let res = crate::cmd::train_common::train_and_eval(ctx, &dir, &dir.join("out"), steps, &args.backend, &extra)?;
-        ctx.info(format!("      test PSNR {:.2} dB, SSIM {:.4} ({:.1} s)", res.psnr, res.ssim, t0.elapsed().as_secs_f64()));
+        ctx.info(format!(
+            "[4/5] training {label} ({steps} steps, variant {}/4)",
+            i + 1
+        ));
+        let extra: Vec<String> = if masks.is_none() {
+            vec!["--no-masks".into()]
+        } else {
+            vec![]
+        };
+        let res = crate::cmd::train_common::train_and_eval(
+            ctx,
+            &dir,
+            &dir.join("out"),
+            steps,
+            &args.backend,
+            &extra,
+        )?;
+        ctx.info(format!(
+            "      test PSNR {:.2} dB, SSIM {:.4} ({:.1} s)",
+            res.psnr,
+            res.ssim,
+            t0.elapsed().as_secs_f64()
+        ));
         timings.push((format!("train {label}"), t0.elapsed().as_secs_f64()));
         view_rows.push((label.to_string(), res));
     }
@@ -276,7 +368,13 @@ pub fn run(args: &Args, ctx: &Ctx) -> Result<serde_json::Value> {
     let mut tables = Vec::new();
     let mask_table = Table {
         caption: "Motion masks (RoMo vs exact ground truth)".into(),
-        header: vec!["frames".into(), "J mean".into(), "J recall".into(), "precision".into(), "recall".into()],
+        header: vec![
+            "frames".into(),
+            "J mean".into(),
+            "J recall".into(),
+            "precision".into(),
+            "recall".into(),
+        ],
         rows: vec![vec![
             train.len().to_string(),
             format!("{:.3}", mask_metrics.j_mean),
@@ -289,7 +387,12 @@ pub fn run(args: &Args, ctx: &Ctx) -> Result<serde_json::Value> {
     if !pose_rows.is_empty() {
         tables.push(Table {
             caption: "Poses (COLMAP vs generator ground truth, Sim(3)-aligned)".into(),
-            header: vec!["masks".into(), "registered".into(), "ATE".into(), "RPE rot (deg)".into()],
+            header: vec![
+                "masks".into(),
+                "registered".into(),
+                "ATE".into(),
+                "RPE rot (deg)".into(),
+            ],
             rows: pose_rows
                 .iter()
                 .map(|r| {
@@ -304,11 +407,28 @@ pub fn run(args: &Args, ctx: &Ctx) -> Result<serde_json::Value> {
         });
     }
     tables.push(Table {
-        caption: format!("Held-out clean views ({} views, {steps} steps, ground-truth poses)", test.len()),
-        header: vec!["training".into(), "PSNR".into(), "SSIM".into(), "splats".into(), "seconds".into()],
+        caption: format!(
+            "Held-out clean views ({} views, {steps} steps, ground-truth poses)",
+            test.len()
+        ),
+        header: vec![
+            "training".into(),
+            "PSNR".into(),
+            "SSIM".into(),
+            "splats".into(),
+            "seconds".into(),
+        ],
         rows: view_rows
             .iter()
-            .map(|(l, r)| vec![l.clone(), format!("{:.2}", r.psnr), format!("{:.4}", r.ssim), r.splats.to_string(), format!("{:.0}", r.seconds)])
+            .map(|(l, r)| {
+                vec![
+                    l.clone(),
+                    format!("{:.2}", r.psnr),
+                    format!("{:.4}", r.ssim),
+                    r.splats.to_string(),
+                    format!("{:.0}", r.seconds),
+                ]
+            })
             .collect(),
     });
     for t in &tables {
@@ -316,34 +436,62 @@ pub fn run(args: &Args, ctx: &Ctx) -> Result<serde_json::Value> {
     }
 
     // Report.
-    let mut rep = Report { title: format!("romosplat demo — {}", spec.name), timings, tables, ..Default::default() };
+    let mut rep = Report {
+        title: format!("romosplat demo — {}", spec.name),
+        timings,
+        tables,
+        ..Default::default()
+    };
     rep.charts.push(Chart {
         title: "training loss".into(),
         x_label: "step".into(),
         y_label: "loss".into(),
-        series: view_rows.iter().map(|(l, r)| Series { name: l.clone(), points: r.loss_curve.clone() }).collect(),
+        series: view_rows
+            .iter()
+            .map(|(l, r)| Series {
+                name: l.clone(),
+                points: r.loss_curve.clone(),
+            })
+            .collect(),
     });
     rep.charts.push(Chart {
         title: "training PSNR".into(),
         x_label: "step".into(),
         y_label: "dB".into(),
-        series: view_rows.iter().map(|(l, r)| Series { name: l.clone(), points: r.psnr_curve.clone() }).collect(),
+        series: view_rows
+            .iter()
+            .map(|(l, r)| Series {
+                name: l.clone(),
+                points: r.psnr_curve.clone(),
+            })
+            .collect(),
     });
     let step = (train.len() / 8).max(1);
     for n in train.iter().step_by(step).take(8) {
-        let img = image::open(video.join("images").join(n)).with_context(|| format!("{}: cannot read", n))?.to_rgb8();
+        let img = image::open(video.join("images").join(n))
+            .with_context(|| format!("{}: cannot read", n))?
+            .to_rgb8();
         let mask = image::open(video.join("masks").join(format!("{n}.png")))?.to_luma8();
         let over = report::thumbnail(&report::overlay_mask(&img, &mask), 320);
-        rep.contact_sheet.push(Figure { caption: n.clone(), png: report::png_rgb8(&over)? });
+        rep.contact_sheet.push(Figure {
+            caption: n.clone(),
+            png: report::png_rgb8(&over)?,
+        });
     }
     for (vi, n) in test.iter().enumerate().take(3) {
         let mut row = vec![];
         let gt = image::open(scene_dir.join("images").join(n))?.to_rgb8();
-        row.push(Figure { caption: format!("{n}: ground truth"), png: report::png_rgb8(&report::thumbnail(&gt, 320))? });
+        row.push(Figure {
+            caption: format!("{n}: ground truth"),
+            png: report::png_rgb8(&report::thumbnail(&gt, 320))?,
+        });
         for (l, r) in &view_rows {
             if let Some(p) = r.renders.get(vi) {
                 let img = image::open(p)?.to_rgb8();
-                row.push(Figure { caption: l.clone(), png: report::png_rgb8(&report::thumbnail(&img, 320))? });
+                row.push(Figure {
+                    caption: l.clone(),
+                    png: report::png_rgb8(&report::thumbnail(&img, 320))?,
+                });
             }
         }
         rep.renders.push(row);
@@ -353,7 +501,16 @@ pub fn run(args: &Args, ctx: &Ctx) -> Result<serde_json::Value> {
     ctx.info(format!("report: {}", report_path.display()));
     summary.insert(
         "views".into(),
-        view_rows.iter().map(|(l, r)| (l.clone(), json!({ "psnr": r.psnr, "ssim": r.ssim, "splats": r.splats }))).collect::<serde_json::Map<_, _>>().into(),
+        view_rows
+            .iter()
+            .map(|(l, r)| {
+                (
+                    l.clone(),
+                    json!({ "psnr": r.psnr, "ssim": r.ssim, "splats": r.splats }),
+                )
+            })
+            .collect::<serde_json::Map<_, _>>()
+            .into(),
     );
     summary.insert("report".into(), json!(report_path));
     Ok(summary.into())
@@ -370,11 +527,22 @@ pub fn print_table(ctx: &Ctx, t: &Table) {
         }
     }
     let fmt = |cells: &[String]| {
-        cells.iter().enumerate().map(|(i, c)| format!("{:<w$}", c, w = widths.get(i).copied().unwrap_or(0))).collect::<Vec<_>>().join("  ")
+        cells
+            .iter()
+            .enumerate()
+            .map(|(i, c)| format!("{:<w$}", c, w = widths.get(i).copied().unwrap_or(0)))
+            .collect::<Vec<_>>()
+            .join("  ")
     };
     ctx.info(format!("\n{}", t.caption));
     ctx.info(fmt(&t.header));
-    ctx.info(widths.iter().map(|w| "-".repeat(*w)).collect::<Vec<_>>().join("  "));
+    ctx.info(
+        widths
+            .iter()
+            .map(|w| "-".repeat(*w))
+            .collect::<Vec<_>>()
+            .join("  "),
+    );
     for r in &t.rows {
         ctx.info(fmt(r));
     }

@@ -73,7 +73,9 @@ struct Sub<T: clap::Args> {
 }
 
 fn parse<T: clap::Args + std::fmt::Debug>(argv: &[String]) -> Result<T> {
-    Ok(Sub::<T>::try_parse_from(argv).with_context(|| format!("options for {}", argv[0]))?.args)
+    Ok(Sub::<T>::try_parse_from(argv)
+        .with_context(|| format!("options for {}", argv[0]))?
+        .args)
 }
 
 fn s(p: &Path) -> String {
@@ -89,10 +91,17 @@ fn prepare_scene(args: &Args, scene: &Path, ctx: &Ctx) -> Result<()> {
             std::fs::remove_dir_all(&images)?;
         }
         let frames = loader::video::extract_frames(video, scene, args.fps)?;
-        ctx.info(format!("  {} frames from {}", frames.len(), video.display()));
+        ctx.info(format!(
+            "  {} frames from {}",
+            frames.len(),
+            video.display()
+        ));
         return Ok(());
     }
-    let src = args.scene.as_deref().context("--scene or --video is required")?;
+    let src = args
+        .scene
+        .as_deref()
+        .context("--scene or --video is required")?;
     if !src.join("images").is_dir() {
         bail!("{}: no images/ folder", src.display());
     }
@@ -121,7 +130,8 @@ fn relink(src: &Path, dst: &Path) -> Result<()> {
             std::fs::remove_dir_all(dst)?;
         }
     }
-    let src = std::fs::canonicalize(src).with_context(|| format!("{}: not found", src.display()))?;
+    let src =
+        std::fs::canonicalize(src).with_context(|| format!("{}: not found", src.display()))?;
     std::os::unix::fs::symlink(&src, dst).with_context(|| format!("linking {}", dst.display()))
 }
 
@@ -134,12 +144,21 @@ pub fn run(args: &Args, ctx: &Ctx) -> Result<serde_json::Value> {
     let mut ran: Vec<(Stage, bool)> = Vec::new();
     let mut summary = serde_json::Map::new();
     let from = args.from;
-    let input: PathBuf = args.video.clone().or_else(|| args.scene.as_ref().map(|d| d.join("images"))).context("no input")?;
+    let input: PathBuf = args
+        .video
+        .clone()
+        .or_else(|| args.scene.as_ref().map(|d| d.join("images")))
+        .context("no input")?;
 
     // frames
     let t0 = Instant::now();
     let images = scene.join("images");
-    let go = should_run(Stage::Frames, from, std::slice::from_ref(&images), std::slice::from_ref(&input));
+    let go = should_run(
+        Stage::Frames,
+        from,
+        std::slice::from_ref(&images),
+        std::slice::from_ref(&input),
+    );
     if go {
         ctx.info("[frames]");
         prepare_scene(args, &scene, ctx)?;
@@ -150,7 +169,13 @@ pub fn run(args: &Args, ctx: &Ctx) -> Result<serde_json::Value> {
     // mask
     let t0 = Instant::now();
     let masks = scene.join("masks");
-    let go = !args.no_masks && should_run(Stage::Mask, from, std::slice::from_ref(&masks), std::slice::from_ref(&images));
+    let go = !args.no_masks
+        && should_run(
+            Stage::Mask,
+            from,
+            std::slice::from_ref(&masks),
+            std::slice::from_ref(&images),
+        );
     if go {
         ctx.info("[mask] RoMo motion masks");
         let m = super::mask::run(
@@ -172,8 +197,18 @@ pub fn run(args: &Args, ctx: &Ctx) -> Result<serde_json::Value> {
     // pose
     let t0 = Instant::now();
     let sparse = scene.join("sparse/0");
-    let pose_inputs = if args.no_masks { vec![images.clone()] } else { vec![images.clone(), masks.clone()] };
-    let go = !args.keep_poses && should_run(Stage::Pose, from, std::slice::from_ref(&sparse), &pose_inputs);
+    let pose_inputs = if args.no_masks {
+        vec![images.clone()]
+    } else {
+        vec![images.clone(), masks.clone()]
+    };
+    let go = !args.keep_poses
+        && should_run(
+            Stage::Pose,
+            from,
+            std::slice::from_ref(&sparse),
+            &pose_inputs,
+        );
     if go {
         ctx.info("[pose] COLMAP");
         let mut argv = vec![
@@ -196,18 +231,39 @@ pub fn run(args: &Args, ctx: &Ctx) -> Result<serde_json::Value> {
 
     // train (on the undistorted copy when COLMAP made one)
     let t0 = Instant::now();
-    let train_scene = if scene.join("undistorted/images").is_dir() { scene.join("undistorted") } else { scene.clone() };
+    let train_scene = if scene.join("undistorted/images").is_dir() {
+        scene.join("undistorted")
+    } else {
+        scene.clone()
+    };
     let train_out = out.join("train");
     let ply = train_out.join("splats.ply");
-    let go = should_run(Stage::Train, from, std::slice::from_ref(&ply), &[sparse.clone(), masks.clone(), images.clone()]);
+    let go = should_run(
+        Stage::Train,
+        from,
+        std::slice::from_ref(&ply),
+        &[sparse.clone(), masks.clone(), images.clone()],
+    );
     let mut result = None;
     if go {
         ctx.info(format!("[train] {} steps", args.steps));
-        let mut extra = vec!["--downscale".to_string(), args.downscale.to_string(), "--holdout-every".into(), args.holdout_every.to_string()];
+        let mut extra = vec![
+            "--downscale".to_string(),
+            args.downscale.to_string(),
+            "--holdout-every".into(),
+            args.holdout_every.to_string(),
+        ];
         if args.no_masks {
             extra.push("--no-masks".into());
         }
-        let r = super::train_common::train_and_eval(ctx, &train_scene, &train_out, args.steps, &args.backend, &extra)?;
+        let r = super::train_common::train_and_eval(
+            ctx,
+            &train_scene,
+            &train_out,
+            args.steps,
+            &args.backend,
+            &extra,
+        )?;
         summary.insert("train".into(), r.summary.clone());
         result = Some(r);
     }
@@ -217,7 +273,12 @@ pub fn run(args: &Args, ctx: &Ctx) -> Result<serde_json::Value> {
     // export (cleaned)
     let t0 = Instant::now();
     let export = out.join(format!("splats_clean.{}", args.format));
-    let go = should_run(Stage::Export, from, std::slice::from_ref(&export), std::slice::from_ref(&ply));
+    let go = should_run(
+        Stage::Export,
+        from,
+        std::slice::from_ref(&export),
+        std::slice::from_ref(&ply),
+    );
     if go {
         ctx.info(format!("[export] cleaned {}", export.display()));
         let e = super::export::run(
@@ -243,7 +304,12 @@ pub fn run(args: &Args, ctx: &Ctx) -> Result<serde_json::Value> {
     // report
     let t0 = Instant::now();
     let report_path = out.join("report.html");
-    let go = should_run(Stage::Report, from, std::slice::from_ref(&report_path), &[ply.clone(), export.clone()]);
+    let go = should_run(
+        Stage::Report,
+        from,
+        std::slice::from_ref(&report_path),
+        &[ply.clone(), export.clone()],
+    );
     if go {
         write_report(&report_path, &scene, &timings, result.as_ref(), &summary)?;
         ctx.info(format!("[report] {}", report_path.display()));
@@ -257,31 +323,67 @@ pub fn run(args: &Args, ctx: &Ctx) -> Result<serde_json::Value> {
         rows: ran
             .iter()
             .zip(&timings)
-            .map(|((st, go), (_, secs))| vec![st.name().into(), if *go { "ran".into() } else { "up to date".into() }, format!("{secs:.1}")])
+            .map(|((st, go), (_, secs))| {
+                vec![
+                    st.name().into(),
+                    if *go {
+                        "ran".into()
+                    } else {
+                        "up to date".into()
+                    },
+                    format!("{secs:.1}"),
+                ]
+            })
             .collect(),
     };
     print_table(ctx, &table);
     if let Some(r) = &result {
-        ctx.info(format!("held-out views: PSNR {:.2} dB, SSIM {:.4}; {} splats", r.psnr, r.ssim, r.splats));
+        ctx.info(format!(
+            "held-out views: PSNR {:.2} dB, SSIM {:.4}; {} splats",
+            r.psnr, r.ssim, r.splats
+        ));
     }
-    summary.insert("stages".into(), ran.iter().map(|(st, go)| (st.name().to_string(), json!(go))).collect::<serde_json::Map<_, _>>().into());
+    summary.insert(
+        "stages".into(),
+        ran.iter()
+            .map(|(st, go)| (st.name().to_string(), json!(go)))
+            .collect::<serde_json::Map<_, _>>()
+            .into(),
+    );
     summary.insert("splats".into(), json!(ply));
     summary.insert("export_path".into(), json!(export));
     summary.insert("report".into(), json!(report_path));
     Ok(summary.into())
 }
 
-fn write_report(path: &Path, scene: &Path, timings: &[(String, f64)], result: Option<&super::train_common::VariantResult>, summary: &serde_json::Map<String, serde_json::Value>) -> Result<()> {
-    let mut rep = Report { title: format!("romosplat run — {}", scene.display()), timings: timings.to_vec(), ..Default::default() };
+fn write_report(
+    path: &Path,
+    scene: &Path,
+    timings: &[(String, f64)],
+    result: Option<&super::train_common::VariantResult>,
+    summary: &serde_json::Map<String, serde_json::Value>,
+) -> Result<()> {
+    let mut rep = Report {
+        title: format!("romosplat run — {}", scene.display()),
+        timings: timings.to_vec(),
+        ..Default::default()
+    };
     if let Some(p) = summary.get("pose") {
         rep.tables.push(Table {
             caption: "COLMAP".into(),
-            header: vec!["registered".into(), "total".into(), "points".into(), "mean reprojection error (px)".into()],
+            header: vec![
+                "registered".into(),
+                "total".into(),
+                "points".into(),
+                "mean reprojection error (px)".into(),
+            ],
             rows: vec![vec![
                 p["registered"].to_string(),
                 p["total"].to_string(),
                 p["points"].to_string(),
-                p["mean_reprojection_error"].as_f64().map_or("-".into(), |v| format!("{v:.3}")),
+                p["mean_reprojection_error"]
+                    .as_f64()
+                    .map_or("-".into(), |v| format!("{v:.3}")),
             ]],
         });
     }
@@ -289,24 +391,54 @@ fn write_report(path: &Path, scene: &Path, timings: &[(String, f64)], result: Op
         rep.tables.push(Table {
             caption: "Held-out views".into(),
             header: vec!["PSNR".into(), "SSIM".into(), "splats".into()],
-            rows: vec![vec![format!("{:.2}", r.psnr), format!("{:.4}", r.ssim), r.splats.to_string()]],
+            rows: vec![vec![
+                format!("{:.2}", r.psnr),
+                format!("{:.4}", r.ssim),
+                r.splats.to_string(),
+            ]],
         });
-        rep.charts.push(Chart { title: "training loss".into(), x_label: "step".into(), y_label: "loss".into(), series: vec![Series { name: "loss".into(), points: r.loss_curve.clone() }] });
-        rep.charts.push(Chart { title: "training PSNR".into(), x_label: "step".into(), y_label: "dB".into(), series: vec![Series { name: "PSNR".into(), points: r.psnr_curve.clone() }] });
+        rep.charts.push(Chart {
+            title: "training loss".into(),
+            x_label: "step".into(),
+            y_label: "loss".into(),
+            series: vec![Series {
+                name: "loss".into(),
+                points: r.loss_curve.clone(),
+            }],
+        });
+        rep.charts.push(Chart {
+            title: "training PSNR".into(),
+            x_label: "step".into(),
+            y_label: "dB".into(),
+            series: vec![Series {
+                name: "PSNR".into(),
+                points: r.psnr_curve.clone(),
+            }],
+        });
         for p in r.renders.iter().take(4) {
-            let img = image::open(p).with_context(|| format!("{}: cannot read", p.display()))?.to_rgb8();
-            rep.renders.push(vec![Figure { caption: s(p), png: report::png_rgb8(&report::thumbnail(&img, 320))? }]);
+            let img = image::open(p)
+                .with_context(|| format!("{}: cannot read", p.display()))?
+                .to_rgb8();
+            rep.renders.push(vec![Figure {
+                caption: s(p),
+                png: report::png_rgb8(&report::thumbnail(&img, 320))?,
+            }]);
         }
     }
     let names = loader::scene::list_images(&scene.join("images"))?;
     let step = (names.len() / 8).max(1);
     for n in names.iter().step_by(step).take(8) {
-        let img = image::open(scene.join("images").join(n)).with_context(|| format!("{n}: cannot read"))?.to_rgb8();
+        let img = image::open(scene.join("images").join(n))
+            .with_context(|| format!("{n}: cannot read"))?
+            .to_rgb8();
         let over = match image::open(scene.join("masks").join(format!("{n}.png"))) {
             Ok(m) => report::overlay_mask(&img, &m.to_luma8()),
             Err(_) => img,
         };
-        rep.contact_sheet.push(Figure { caption: n.clone(), png: report::png_rgb8(&report::thumbnail(&over, 320))? });
+        rep.contact_sheet.push(Figure {
+            caption: n.clone(),
+            png: report::png_rgb8(&report::thumbnail(&over, 320))?,
+        });
     }
     rep.write(path)
 }

@@ -15,7 +15,6 @@ pub struct VariantResult {
     pub ssim: f64,
     pub splats: usize,
     pub seconds: f64,
-    pub splats_ply: PathBuf,
     /// (step, loss) samples.
     pub loss_curve: Vec<(f64, f64)>,
     /// (step, training PSNR) samples.
@@ -41,14 +40,25 @@ struct RenderCli {
 fn curve(summary: &serde_json::Value, key: &str) -> Vec<(f64, f64)> {
     summary["history"]
         .as_array()
-        .map(|h| h.iter().filter_map(|e| Some((e["step"].as_f64()?, e[key].as_f64()?))).collect())
+        .map(|h| {
+            h.iter()
+                .filter_map(|e| Some((e["step"].as_f64()?, e[key].as_f64()?)))
+                .collect()
+        })
         .unwrap_or_default()
 }
 
 /// Train `scene` (its split's `clutter` views; masks when present) for
 /// `steps`, then render and score its `extra` views. `extra_args` are passed
 /// to `romosplat train` as given (e.g. `["--no-masks"]`).
-pub fn train_and_eval(ctx: &Ctx, scene: &Path, out: &Path, steps: usize, backend: &str, extra_args: &[String]) -> Result<VariantResult> {
+pub fn train_and_eval(
+    ctx: &Ctx,
+    scene: &Path,
+    out: &Path,
+    steps: usize,
+    backend: &str,
+    extra_args: &[String],
+) -> Result<VariantResult> {
     let t0 = std::time::Instant::now();
     let mut argv: Vec<String> = vec![
         "train".into(),
@@ -81,14 +91,17 @@ pub fn train_and_eval(ctx: &Ctx, scene: &Path, out: &Path, steps: usize, backend
     let rendered = super::render::run(&rcli.args, ctx)?;
     let renders = rendered["images"]
         .as_array()
-        .map(|a| a.iter().filter_map(|p| p.as_str().map(PathBuf::from)).collect())
+        .map(|a| {
+            a.iter()
+                .filter_map(|p| p.as_str().map(PathBuf::from))
+                .collect()
+        })
         .unwrap_or_default();
     Ok(VariantResult {
         psnr: summary["test"]["mean_psnr"].as_f64().unwrap_or(f64::NAN),
         ssim: summary["test"]["mean_ssim"].as_f64().unwrap_or(f64::NAN),
         splats: summary["report"]["splats"].as_u64().unwrap_or(0) as usize,
         seconds: t0.elapsed().as_secs_f64(),
-        splats_ply: ply,
         loss_curve: curve(&summary, "loss"),
         psnr_curve: curve(&summary, "psnr"),
         renders,

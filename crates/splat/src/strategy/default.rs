@@ -113,9 +113,11 @@ impl Strategy for DefaultStrategy {
 
     fn wants_refine(&self, step: u32) -> bool {
         let o = &self.opts;
-        let dens = self.densifying(step) && step > o.densify_from && step.is_multiple_of(o.densify_every);
-        let reset =
-            self.densifying(step) && o.opacity_reset_every > 0 && step.is_multiple_of(o.opacity_reset_every);
+        let dens =
+            self.densifying(step) && step > o.densify_from && step.is_multiple_of(o.densify_every);
+        let reset = self.densifying(step)
+            && o.opacity_reset_every > 0
+            && step.is_multiple_of(o.opacity_reset_every);
         dens || reset
     }
 
@@ -133,7 +135,10 @@ impl Strategy for DefaultStrategy {
                 .then_some(o.prune_screen_px);
             densify_and_prune(state, &o, scene, size_threshold, seed, &mut rep);
         }
-        if self.densifying(step) && o.opacity_reset_every > 0 && step.is_multiple_of(o.opacity_reset_every) {
+        if self.densifying(step)
+            && o.opacity_reset_every > 0
+            && step.is_multiple_of(o.opacity_reset_every)
+        {
             let cap = logit(o.opacity_reset_value);
             for (l, (m, v)) in state.splats.opacity_logits.iter_mut().zip(
                 state
@@ -242,7 +247,8 @@ fn densify_and_prune(
     for (i, r) in remove.iter_mut().enumerate() {
         let s = &state.splats;
         let op = sigmoid(s.opacity_logits[i]);
-        let mut bad = op.is_nan() || op < o.prune_opacity || !s.means[i].iter().all(|v| v.is_finite());
+        let mut bad =
+            op.is_nan() || op < o.prune_opacity || !s.means[i].iter().all(|v| v.is_finite());
         if let Some(px) = size_threshold {
             let big_screen = state.stats.max_radius.get(i).is_some_and(|&m| m > px);
             bad |= big_screen || max_scale(&s.log_scales[i]) > world;
