@@ -53,7 +53,7 @@ const VARIANTS: [(&str, &str); 4] = [
 ];
 
 /// Symlink `src` at `dst` (replacing what is there).
-fn link(src: &Path, dst: &Path) -> Result<()> {
+pub fn link(src: &Path, dst: &Path) -> Result<()> {
     if dst.symlink_metadata().is_ok() {
         if dst.is_dir() && !dst.symlink_metadata()?.file_type().is_symlink() {
             std::fs::remove_dir_all(dst)?;

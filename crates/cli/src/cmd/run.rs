@@ -5,7 +5,7 @@
 //! and a summary table closes the run. The user's scene folder is never
 //! written to: `DIR/scene` links its images and holds our masks and model.
 
-use super::demo::print_table;
+use super::demo::{link, print_table};
 use crate::Ctx;
 use crate::pipeline::{Stage, should_run};
 use crate::report::{self, Chart, Figure, Report, Series, Table};
@@ -107,32 +107,23 @@ fn prepare_scene(args: &Args, scene: &Path, ctx: &Ctx) -> Result<()> {
     }
     for name in ["images", "gt_motion"] {
         if src.join(name).is_dir() {
-            relink(&src.join(name), &scene.join(name))?;
+            link(&src.join(name), &scene.join(name))?;
         }
     }
     for name in ["split.json", "transforms.json"] {
         if src.join(name).is_file() {
-            relink(&src.join(name), &scene.join(name))?;
+            link(&src.join(name), &scene.join(name))?;
         }
     }
     if args.keep_poses && src.join("sparse/0").is_dir() {
         std::fs::create_dir_all(scene.join("sparse"))?;
-        relink(&src.join("sparse/0"), &scene.join("sparse/0"))?;
+        link(&src.join("sparse/0"), &scene.join("sparse/0"))?;
     }
     Ok(())
 }
 
-fn relink(src: &Path, dst: &Path) -> Result<()> {
-    if dst.symlink_metadata().is_ok() {
-        if dst.symlink_metadata()?.file_type().is_symlink() || dst.is_file() {
-            std::fs::remove_file(dst)?;
-        } else {
-            std::fs::remove_dir_all(dst)?;
-        }
-    }
-    let src =
-        std::fs::canonicalize(src).with_context(|| format!("{}: not found", src.display()))?;
-    std::os::unix::fs::symlink(&src, dst).with_context(|| format!("linking {}", dst.display()))
+fn status(ran: bool) -> &'static str {
+    if ran { "ran" } else { "up to date" }
 }
 
 /// Run the pipeline.
@@ -141,7 +132,7 @@ pub fn run(args: &Args, ctx: &Ctx) -> Result<serde_json::Value> {
     std::fs::create_dir_all(out).with_context(|| format!("creating {}", out.display()))?;
     let scene = out.join("scene");
     let mut timings: Vec<(String, f64)> = Vec::new();
-    let mut ran: Vec<(Stage, bool)> = Vec::new();
+    let mut ran: Vec<(Stage, &str)> = Vec::new();
     let mut summary = serde_json::Map::new();
     let from = args.from;
     let input: PathBuf = args
@@ -163,7 +154,7 @@ pub fn run(args: &Args, ctx: &Ctx) -> Result<serde_json::Value> {
         ctx.info("[frames]");
         prepare_scene(args, &scene, ctx)?;
     }
-    ran.push((Stage::Frames, go));
+    ran.push((Stage::Frames, status(go)));
     timings.push(("frames".into(), t0.elapsed().as_secs_f64()));
 
     // mask
@@ -191,7 +182,14 @@ pub fn run(args: &Args, ctx: &Ctx) -> Result<serde_json::Value> {
         )?;
         summary.insert("mask".into(), m);
     }
-    ran.push((Stage::Mask, go));
+    ran.push((
+        Stage::Mask,
+        if args.no_masks {
+            "skipped (--no-masks)"
+        } else {
+            status(go)
+        },
+    ));
     timings.push(("mask".into(), t0.elapsed().as_secs_f64()));
 
     // pose
@@ -226,7 +224,14 @@ pub fn run(args: &Args, ctx: &Ctx) -> Result<serde_json::Value> {
         let p = super::pose::run(&parse::<super::pose::Args>(&argv)?, ctx)?;
         summary.insert("pose".into(), p);
     }
-    ran.push((Stage::Pose, go));
+    ran.push((
+        Stage::Pose,
+        if args.keep_poses {
+            "kept the scene's poses"
+        } else {
+            status(go)
+        },
+    ));
     timings.push(("pose".into(), t0.elapsed().as_secs_f64()));
 
     // train (on the undistorted copy when COLMAP made one)
@@ -267,7 +272,7 @@ pub fn run(args: &Args, ctx: &Ctx) -> Result<serde_json::Value> {
         summary.insert("train".into(), r.summary.clone());
         result = Some(r);
     }
-    ran.push((Stage::Train, go));
+    ran.push((Stage::Train, status(go)));
     timings.push(("train".into(), t0.elapsed().as_secs_f64()));
 
     // export (cleaned)
@@ -298,7 +303,7 @@ pub fn run(args: &Args, ctx: &Ctx) -> Result<serde_json::Value> {
         )?;
         summary.insert("export".into(), e);
     }
-    ran.push((Stage::Export, go));
+    ran.push((Stage::Export, status(go)));
     timings.push(("export".into(), t0.elapsed().as_secs_f64()));
 
     // report
@@ -314,7 +319,7 @@ pub fn run(args: &Args, ctx: &Ctx) -> Result<serde_json::Value> {
         write_report(&report_path, &scene, &timings, result.as_ref(), &summary)?;
         ctx.info(format!("[report] {}", report_path.display()));
     }
-    ran.push((Stage::Report, go));
+    ran.push((Stage::Report, status(go)));
     timings.push(("report".into(), t0.elapsed().as_secs_f64()));
 
     let table = Table {
@@ -324,15 +329,7 @@ pub fn run(args: &Args, ctx: &Ctx) -> Result<serde_json::Value> {
             .iter()
             .zip(&timings)
             .map(|((st, go), (_, secs))| {
-                vec![
-                    st.name().into(),
-                    if *go {
-                        "ran".into()
-                    } else {
-                        "up to date".into()
-                    },
-                    format!("{secs:.1}"),
-                ]
+                vec![st.name().into(), (*go).to_string(), format!("{secs:.1}")]
             })
             .collect(),
     };
@@ -346,7 +343,7 @@ pub fn run(args: &Args, ctx: &Ctx) -> Result<serde_json::Value> {
     summary.insert(
         "stages".into(),
         ran.iter()
-            .map(|(st, go)| (st.name().to_string(), json!(go)))
+            .map(|(st, go)| (st.name().to_string(), json!(*go == "ran")))
             .collect::<serde_json::Map<_, _>>()
             .into(),
     );
