@@ -2,53 +2,24 @@
 //! PSNR and SSIM (11×11 Gaussian window, σ = 1.5, as scikit-image / INRIA)
 //! per image and mean, optionally excluding ground-truth moving pixels.
 
-use super::render::split_frames;
-use super::train::{BackendKind, apply_poses, make_backend};
+use super::train::make_backend;
 use crate::Ctx;
-use loader::{Scene, SceneOptions};
-use splat::io::read_ply;
 use splat::train::data::load_views;
 use splat::train::eval::evaluate;
 use splat::types::RenderOptions;
-use std::path::PathBuf;
 
 /// `romosplat eval views`
 #[derive(Debug, clap::Args)]
 pub struct Args {
-    /// Splats (INRIA PLY).
-    #[arg(long)]
-    pub splats: PathBuf,
-    /// Scene folder with the reference images.
-    #[arg(long)]
-    pub scene: PathBuf,
-    /// Split to score: extra, clutter, clean, or all.
-    #[arg(long, default_value = "extra")]
-    pub split: String,
+    #[command(flatten)]
+    pub views: super::render::ViewArgs,
     /// Exclude ground-truth moving pixels (gt_motion/) from the metrics.
     #[arg(long)]
     pub mask_gt: bool,
-    /// COLMAP model folder whose poses replace the scene's.
-    #[arg(long)]
-    pub poses: Option<PathBuf>,
-    /// Integer image downscale factor.
-    #[arg(long, default_value_t = 1)]
-    pub downscale: u32,
-    #[arg(long, value_enum, default_value_t = BackendKind::Auto)]
-    pub backend: BackendKind,
 }
 
 pub fn run(args: &Args, ctx: &Ctx) -> anyhow::Result<serde_json::Value> {
-    let splats = read_ply(&args.splats)?;
-    let mut scene = Scene::load(
-        &args.scene,
-        &SceneOptions {
-            downscale: args.downscale,
-        },
-    )?;
-    if let Some(p) = &args.poses {
-        apply_poses(&mut scene, p)?;
-    }
-    let idx = split_frames(&scene, &args.split)?;
+    let (splats, scene, idx) = args.views.load()?;
     let mut views = load_views(&scene, &idx, false)?;
     let mut masked = 0;
     if args.mask_gt {
@@ -64,7 +35,7 @@ pub fn run(args: &Args, ctx: &Ctx) -> anyhow::Result<serde_json::Value> {
             }
         }
     }
-    let mut backend = make_backend(args.backend, ctx)?;
+    let mut backend = make_backend(args.views.backend, ctx)?;
     let opts = RenderOptions {
         sh_degree: splats.sh_degree,
         ..Default::default()
@@ -83,7 +54,7 @@ pub fn run(args: &Args, ctx: &Ctx) -> anyhow::Result<serde_json::Value> {
         rep.mean_ssim
     ));
     let mut v = serde_json::to_value(&rep)?;
-    v["split"] = serde_json::json!(args.split);
+    v["split"] = serde_json::json!(args.views.split);
     v["mask_gt_views"] = serde_json::json!(masked);
     Ok(v)
 }

@@ -7,19 +7,20 @@ use anyhow::bail;
 use loader::{Scene, SceneOptions};
 use splat::io::read_ply;
 use splat::train::data::camera_of;
-use splat::types::RenderOptions;
+use splat::types::{RenderOptions, Splats};
 use std::path::PathBuf;
 
-/// `romosplat render`
+/// What `render` and `eval views` share: the splats, the scene and which of
+/// its views, with optional replacement poses.
 #[derive(Debug, clap::Args)]
-pub struct Args {
+pub struct ViewArgs {
     /// Splats (INRIA PLY).
     #[arg(long)]
     pub splats: PathBuf,
-    /// Scene folder whose cameras to render.
+    /// Scene folder whose cameras (and reference images) to use.
     #[arg(long)]
     pub scene: PathBuf,
-    /// Split to render: extra, clutter, clean, or all.
+    /// Split: extra, clutter, clean, or all.
     #[arg(long, default_value = "extra")]
     pub split: String,
     /// COLMAP model folder whose poses replace the scene's.
@@ -30,6 +31,32 @@ pub struct Args {
     pub downscale: u32,
     #[arg(long, value_enum, default_value_t = BackendKind::Auto)]
     pub backend: BackendKind,
+}
+
+impl ViewArgs {
+    /// Read the splats and the scene (with replacement poses) and pick the
+    /// split's posed frames.
+    pub fn load(&self) -> anyhow::Result<(Splats, Scene, Vec<usize>)> {
+        let splats = read_ply(&self.splats)?;
+        let mut scene = Scene::load(
+            &self.scene,
+            &SceneOptions {
+                downscale: self.downscale,
+            },
+        )?;
+        if let Some(p) = &self.poses {
+            apply_poses(&mut scene, p)?;
+        }
+        let idx = split_frames(&scene, &self.split)?;
+        Ok((splats, scene, idx))
+    }
+}
+
+/// `romosplat render`
+#[derive(Debug, clap::Args)]
+pub struct Args {
+    #[command(flatten)]
+    pub views: ViewArgs,
     /// Output folder.
     #[arg(long)]
     pub out: PathBuf,
@@ -56,18 +83,8 @@ pub fn split_frames(scene: &Scene, split: &str) -> anyhow::Result<Vec<usize>> {
 }
 
 pub fn run(args: &Args, ctx: &Ctx) -> anyhow::Result<serde_json::Value> {
-    let splats = read_ply(&args.splats)?;
-    let mut scene = Scene::load(
-        &args.scene,
-        &SceneOptions {
-            downscale: args.downscale,
-        },
-    )?;
-    if let Some(p) = &args.poses {
-        apply_poses(&mut scene, p)?;
-    }
-    let idx = split_frames(&scene, &args.split)?;
-    let mut backend = make_backend(args.backend, ctx)?;
+    let (splats, scene, idx) = args.views.load()?;
+    let mut backend = make_backend(args.views.backend, ctx)?;
     let opts = RenderOptions {
         sh_degree: splats.sh_degree,
         ..Default::default()
@@ -79,7 +96,12 @@ pub fn run(args: &Args, ctx: &Ctx) -> anyhow::Result<serde_json::Value> {
         let out = backend.render(&splats, &cam, &opts)?;
         let img = image::Rgb32FImage::from_raw(cam.width, cam.height, out.image)
             .ok_or_else(|| anyhow::anyhow!("render size mismatch"))?;
-        let path = args.out.join(format!("{}.png", scene.frames[i].name));
+        // Named by the frame's stem: `0001.jpg` renders to `0001.png`.
+        let name = &scene.frames[i].name;
+        let stem = std::path::Path::new(name)
+            .file_stem()
+            .map_or(name.as_str(), |s| s.to_str().unwrap_or(name));
+        let path = args.out.join(format!("{stem}.png"));
         loader::io::write_png_rgb32f(&path, &img)?;
         written.push(path);
         pb.inc(1);
@@ -90,5 +112,7 @@ pub fn run(args: &Args, ctx: &Ctx) -> anyhow::Result<serde_json::Value> {
         written.len(),
         args.out.display()
     ));
-    Ok(serde_json::json!({ "split": args.split, "images": written, "backend": backend.name() }))
+    Ok(
+        serde_json::json!({ "split": args.views.split, "images": written, "backend": backend.name() }),
+    )
 }
