@@ -6,6 +6,7 @@
 
 pub mod camera;
 pub mod colmap;
+pub mod composite;
 pub mod davis;
 pub mod error;
 pub mod exr;
