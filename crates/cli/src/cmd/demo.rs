@@ -32,7 +32,7 @@ pub struct Args {
     /// Training backend.
     #[arg(long, default_value = "auto")]
     pub backend: String,
-    /// COLMAP runs on every Nth training frame (default: 3, quick: 1); CPU
+    /// COLMAP runs on every Nth training frame (default: 3, quick: 2); CPU
     /// COLMAP on all 90 demo frames takes tens of minutes on 2 cores.
     #[arg(long)]
     pub pose_stride: Option<usize>,
@@ -42,6 +42,12 @@ pub struct Args {
     /// Skip the COLMAP runs (pose table left empty).
     #[arg(long)]
     pub no_pose: bool,
+    /// COLMAP sequential matching overlap (frames matched after each frame).
+    #[arg(long, default_value_t = 5)]
+    pub pose_overlap: u32,
+    /// Most SIFT features per frame for the COLMAP runs.
+    #[arg(long, default_value_t = 2048)]
+    pub pose_features: u32,
 }
 
 /// The four training variants.
@@ -156,6 +162,7 @@ struct PoseRow {
 
 fn run_pose(
     ctx: &Ctx,
+    args: &Args,
     video: &Path,
     work: &Path,
     masks: Option<&Path>,
@@ -174,6 +181,8 @@ fn run_pose(
         camera_model: loader::CameraModel::PINHOLE,
         use_masks: masks.is_some(),
         undistort: false,
+        overlap: args.pose_overlap,
+        max_num_features: args.pose_features,
         ..Default::default()
     };
     let label = if masks.is_some() {
@@ -299,7 +308,7 @@ pub fn run(args: &Args, ctx: &Ctx) -> Result<serde_json::Value> {
         let t0 = Instant::now();
         let stride = args
             .pose_stride
-            .unwrap_or(if args.quick { 1 } else { 3 })
+            .unwrap_or(if args.quick { 2 } else { 3 })
             .max(1);
         let pose_names: Vec<String> = train.iter().step_by(stride).cloned().collect();
         let pose_dir = out.join("pose_frames");
@@ -333,6 +342,7 @@ pub fn run(args: &Args, ctx: &Ctx) -> Result<serde_json::Value> {
             ctx.info(format!("[3/5] COLMAP with {label}"));
             let (j, mut row, secs) = run_pose(
                 ctx,
+                args,
                 &pose_dir,
                 &out.join("pose").join(key),
                 masks.as_deref(),

@@ -57,7 +57,12 @@ pub struct Args {
     /// Clean: remove splats whose largest σ exceeds this × the median.
     #[arg(long, default_value_t = CleanOptions::default().max_scale_over_median)]
     pub max_scale_over_median: f32,
-    /// Clean: remove splats whose largest σ exceeds this × the scene extent.
+    /// Clean: remove splats whose 3σ radius in the nearest training camera
+    /// exceeds this × the image's larger side (0 = off; needs --scene).
+    #[arg(long, default_value_t = CleanOptions::default().max_footprint)]
+    pub max_footprint: f32,
+    /// Clean: remove splats whose largest σ exceeds this × the scene extent
+    /// (INRIA's big_points_ws uses 0.1; 0 = off).
     #[arg(long, default_value_t = CleanOptions::default().max_scale_extent_fraction)]
     pub max_scale_extent_fraction: f32,
     /// Clean: grow the robust (1st–99th percentile) box by this fraction per side.
@@ -124,6 +129,7 @@ pub fn run(args: &Args, ctx: &Ctx) -> anyhow::Result<serde_json::Value> {
             min_opacity: args.min_opacity,
             max_scale_over_median: args.max_scale_over_median,
             max_scale_extent_fraction: args.max_scale_extent_fraction,
+            max_footprint: args.max_footprint,
             bounds_margin: args.bounds_margin,
             ..CleanOptions::default()
         };

@@ -242,3 +242,62 @@ fn scene_geometry_from_a_colmap_model() {
         assert!((c.center()[a] - want[a] as f32).abs() < 1e-5);
     }
 }
+
+#[test]
+fn a_view_filling_blob_near_a_camera_is_oversized() {
+    let (mut s, mut cams, _) = planted();
+    // A camera just outside the cube, and a splat 0.5 in front of it whose σ
+    // (0.4) passes the median rule (50 × ≈ 0.0126) but whose 3σ radius is
+    // 3 × 0.4 × 100 / 0.5 = 240 px > 200 px, the image's larger side.
+    cams.push(look_at([0.5, 0.5, -0.3], [0.5, 0.5, 0.5]));
+    let blob = s.len();
+    s.means.push([0.5, 0.5, 0.2]);
+    s.log_scales.push([0.4f32.ln(), 0.1f32.ln(), 0.1f32.ln()]);
+    s.rotations.push([1.0, 0.0, 0.0, 0.0]);
+    s.opacity_logits.push(2.0);
+    let k3 = s.coeffs_per_channel() * 3;
+    s.sh.extend(std::iter::repeat_n(0.1, k3));
+    let scene = SceneGeometry {
+        cameras: cams.clone(),
+        points: Vec::new(),
+    };
+    let (kept, rep) = clean(&s, &scene, &CleanOptions::default()).unwrap();
+    assert_eq!(rep.removed_oversized, 3 + 1, "{rep:?}");
+    assert_eq!(rep.kept, 2000);
+    assert!(!kept.means.contains(&s.means[blob]));
+    // The same splat half as large (120 px) stays, and so does everything with
+    // the rule off.
+    s.log_scales[blob] = [0.2f32.ln(), 0.1f32.ln(), 0.1f32.ln()];
+    let (_, rep) = clean(&s, &scene, &CleanOptions::default()).unwrap();
+    assert_eq!((rep.removed_oversized, rep.kept), (3, 2001), "{rep:?}");
+    s.log_scales[blob] = [0.4f32.ln(), 0.1f32.ln(), 0.1f32.ln()];
+    let off = CleanOptions {
+        max_footprint: 0.0,
+        ..Default::default()
+    };
+    let (_, rep) = clean(&s, &scene, &off).unwrap();
+    assert_eq!((rep.removed_oversized, rep.kept), (3, 2001), "{rep:?}");
+}
+
+#[test]
+fn the_extent_rule_is_off_by_default_and_available() {
+    let (s, cams, _) = planted();
+    let scene = SceneGeometry {
+        cameras: cams,
+        points: Vec::new(),
+    };
+    // 0.1 × extent 4.4 = 0.44 < σ 1.5 of the planted oversized splats, and
+    // above every regular σ (≤ 0.02): same three removed either way, while a
+    // tight fraction removes regular splats too.
+    let on = CleanOptions {
+        max_scale_extent_fraction: 0.1,
+        ..Default::default()
+    };
+    assert_eq!(clean(&s, &scene, &on).unwrap().1.removed_oversized, 3);
+    let tight = CleanOptions {
+        max_scale_extent_fraction: 0.003,
+        ..Default::default()
+    };
+    let rep = clean(&s, &scene, &tight).unwrap().1;
+    assert!(rep.removed_oversized > 100, "{rep:?}");
+}
