@@ -74,6 +74,34 @@ pub struct StepStats {
     pub visible: u32,
 }
 
+/// L1 regularisers of the MCMC strategy (Kheradmand et al. 2024; gsplat
+/// `opacity_reg`, `scale_reg`): the loss gains
+/// `opacity · mean_i σ(logit_i) + scale · mean_{i,c} exp(log_scale_ic)`.
+/// Backends add the gradients (`opacity/N · σ(1−σ)` per logit,
+/// `scale/(3N) · exp(s)` per log-scale) to the image-loss gradients before
+/// Adam in every `step`; the reported loss stays the image loss.
+#[derive(Debug, Clone, Copy, Default, PartialEq, Serialize, Deserialize)]
+pub struct Regularization {
+    pub opacity: f32,
+    pub scale: f32,
+}
+
+/// SGLD noise on the means of the MCMC strategy (gsplat
+/// `inject_noise_to_position`): `μ += scale · σ(−k(σ(logit) − t)) · Σ ε`
+/// with Σ = R S² Rᵀ the splat's covariance and ε ~ N(0, I) drawn from a
+/// counter-based hash of (seed, splat, component) identical on every backend
+/// (`reference::mcmc`).
+#[derive(Debug, Clone, Copy, PartialEq, Serialize, Deserialize)]
+pub struct MeansNoise {
+    /// noise_lr × the current means learning rate.
+    pub scale: f32,
+    /// Gate steepness k (100).
+    pub k: f32,
+    /// Gate threshold t (0.005).
+    pub t: f32,
+    pub seed: u32,
+}
+
 /// A training backend (CPU reference or wgpu).
 pub trait TrainBackend {
     /// Human-readable name, e.g. `cpu` or `wgpu (llvmpipe, Vulkan)`.
@@ -85,6 +113,25 @@ pub trait TrainBackend {
     fn step(&mut self, input: &StepInput<'_>) -> Result<StepStats>;
     /// Read back parameters, optimiser state and accumulated statistics.
     fn download(&mut self) -> Result<(Splats, AdamState, DensifyStats)>;
+    /// Set the regularisers added in every later `step` (zero, the initial
+    /// setting, disables them). Backends without support refuse non-zero ones.
+    fn set_regularization(&mut self, reg: Regularization) -> Result<()> {
+        if reg == Regularization::default() {
+            return Ok(());
+        }
+        Err(crate::SplatError::Invalid(format!(
+            "backend {} has no MCMC regularisers",
+            self.name()
+        )))
+    }
+    /// Add SGLD noise to the means of the training state in place (MCMC).
+    fn perturb_means(&mut self, noise: &MeansNoise) -> Result<()> {
+        let _ = noise;
+        Err(crate::SplatError::Invalid(format!(
+            "backend {} has no MCMC position noise",
+            self.name()
+        )))
+    }
     /// Render arbitrary splats (not the training state) from a camera.
     fn render(
         &mut self,
