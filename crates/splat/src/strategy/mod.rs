@@ -7,9 +7,12 @@
 //! INRIA densifies too).
 
 pub mod default;
+pub mod mcmc;
 
 pub use default::{DefaultStrategy, DefaultStrategyOptions};
+pub use mcmc::{McmcStrategy, McmcStrategyOptions};
 
+use crate::backend::{MeansNoise, Regularization};
 use crate::types::{AdamState, DensifyStats, Splats};
 use serde::{Deserialize, Serialize};
 
@@ -54,6 +57,28 @@ pub trait Strategy: Send {
         scene: &SceneInfo,
         seed: u64,
     ) -> RefineReport;
+    /// Regularisers the backend adds to every step's gradients (none by default).
+    fn regularization(&self) -> Regularization {
+        Regularization::default()
+    }
+    /// Position noise to apply after step `step` (1-based count of steps
+    /// done, after any refinement) given that step's means learning rate;
+    /// `seed` is a per-step seed. None by default.
+    fn means_noise(&self, step: u32, lr_means: f32, seed: u64) -> Option<MeansNoise> {
+        let _ = (step, lr_means, seed);
+        None
+    }
+}
+
+/// Which densification strategy a run uses.
+#[derive(Debug, Clone, Copy, Default, PartialEq, Eq, Serialize, Deserialize)]
+#[serde(rename_all = "lowercase")]
+pub enum StrategyKind {
+    /// INRIA adaptive density control ([`DefaultStrategy`]).
+    #[default]
+    Default,
+    /// 3DGS-MCMC relocation and growth ([`McmcStrategy`]).
+    Mcmc,
 }
 
 /// Keep the splats at `keep` (sorted ascending) in params and both Adam moments.
