@@ -7,7 +7,9 @@ use super::project::project_t;
 use super::project_backward::project_backward_t;
 use super::rasterize::rasterize_t;
 use super::rasterize_backward::{ProjGradT, RasterRef, rasterize_backward_t};
-use crate::backend::{StepInput, StepStats, TrainBackend, check_step_input};
+use crate::backend::{
+    MeansNoise, Regularization, StepInput, StepStats, TrainBackend, check_step_input,
+};
 use crate::error::{Result, check_splats};
 use crate::train::adam::{AdamConfig, adam_step};
 use crate::train::loss::loss_and_grad;
@@ -23,6 +25,8 @@ pub struct CpuBackend {
     stats: DensifyStats,
     /// Adam hyper-parameters.
     pub adam_config: AdamConfig,
+    /// MCMC regularisers added to every step's gradients.
+    reg: Regularization,
 }
 
 impl CpuBackend {
@@ -74,7 +78,7 @@ impl TrainBackend for CpuBackend {
         };
         let vp: Vec<ProjGradT<f32>> = rasterize_backward_t(&proj, rr, cam, opts, &v_image);
         let g = project_backward_t(&self.params, cam, opts, &vp);
-        let grads = SplatGrads {
+        let mut grads = SplatGrads {
             means: g.means,
             log_scales: g.log_scales,
             rotations: g.rotations,
@@ -94,6 +98,9 @@ impl TrainBackend for CpuBackend {
                 self.stats.max_radius[i] = self.stats.max_radius[i].max(p.radius);
             }
         }
+        if self.reg != Regularization::default() {
+            super::mcmc::add_regularization_grads(&self.params, &mut grads, &self.reg);
+        }
         adam_step(
             &mut self.params,
             &grads,
@@ -108,6 +115,16 @@ impl TrainBackend for CpuBackend {
             psnr: (10.0 * (1.0 / lv.mse.max(1e-20)).log10()) as f32,
             visible,
         })
+    }
+
+    fn set_regularization(&mut self, reg: Regularization) -> Result<()> {
+        self.reg = reg;
+        Ok(())
+    }
+
+    fn perturb_means(&mut self, noise: &MeansNoise) -> Result<()> {
+        super::mcmc::perturb_means(&mut self.params, noise);
+        Ok(())
     }
 
     fn download(&mut self) -> Result<(Splats, AdamState, DensifyStats)> {

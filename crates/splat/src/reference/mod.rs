@@ -8,6 +8,7 @@
 #![allow(clippy::needless_range_loop, clippy::neg_cmp_op_on_partial_ord)]
 
 pub mod backend;
+pub mod mcmc;
 pub mod project;
 pub mod project_backward;
 pub mod rasterize;
