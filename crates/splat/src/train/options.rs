@@ -2,7 +2,7 @@
 //! `arguments/__init__.py` `OptimizationParams`), each documented.
 
 use crate::backend::LearningRates;
-use crate::strategy::DefaultStrategyOptions;
+use crate::strategy::{DefaultStrategyOptions, McmcStrategyOptions, StrategyKind};
 use serde::{Deserialize, Serialize};
 
 /// How to initialise the splats.
@@ -54,6 +54,14 @@ pub struct TrainOptions {
     pub low_pass: f32,
     /// Densification (INRIA adaptive density control).
     pub strategy: DefaultStrategyOptions,
+    /// Which densification strategy runs: `default` (INRIA, the options in
+    /// `strategy`) or `mcmc` (3DGS-MCMC, the options in `mcmc`). Default: `default`.
+    #[serde(default)]
+    pub strategy_kind: StrategyKind,
+    /// 3DGS-MCMC options (Kheradmand et al. 2024; gsplat defaults), used when
+    /// `strategy_kind` is `mcmc`.
+    #[serde(default)]
+    pub mcmc: McmcStrategyOptions,
     /// Initialisation source.
     pub init: InitMode,
     /// Splats drawn for random initialisation (INRIA synthetic: 100 000).
@@ -88,6 +96,8 @@ impl Default for TrainOptions {
             antialiased: false,
             low_pass: 0.3,
             strategy: DefaultStrategyOptions::default(),
+            strategy_kind: StrategyKind::Default,
+            mcmc: McmcStrategyOptions::default(),
             init: InitMode::Auto,
             random_init_count: 100_000,
             init_max_moving_fraction: 0.5,
@@ -131,6 +141,9 @@ impl TrainOptions {
         }
         if !(0.0..=1.0).contains(&self.init_max_moving_fraction) {
             return bad("init_max_moving_fraction not in [0, 1]".into());
+        }
+        if self.strategy_kind == StrategyKind::Mcmc {
+            self.mcmc.validate()?;
         }
         self.strategy.validate()
     }
