@@ -18,7 +18,9 @@ pub use options::{InitMode, TrainOptions};
 use crate::backend::{LossConfig, StepInput, TrainBackend};
 use crate::error::Result;
 use crate::io::{Checkpoint, write_checkpoint};
-use crate::strategy::{DefaultStrategy, ModelState, RefineReport, SceneInfo, Strategy};
+use crate::strategy::{
+    DefaultStrategy, McmcStrategy, ModelState, RefineReport, SceneInfo, Strategy, StrategyKind,
+};
 use crate::types::{AdamState, RenderOptions, Splats};
 use rand::seq::SliceRandom;
 use rand::{Rng, SeedableRng};
@@ -66,6 +68,12 @@ pub struct TrainReport {
     pub split: usize,
     pub pruned: usize,
     pub opacity_resets: usize,
+    /// Σ dead splats relocated (MCMC).
+    #[serde(default)]
+    pub relocated: usize,
+    /// Σ splats added by MCMC growth.
+    #[serde(default)]
+    pub added: usize,
 }
 
 /// A training run: backend, data, options, where to write checkpoints.
@@ -91,7 +99,11 @@ impl Trainer<'_> {
         if nv == 0 {
             return Err(crate::SplatError::Invalid("no training views".into()));
         }
-        let mut strategy = DefaultStrategy::new(o.strategy.clone());
+        let mut strategy: Box<dyn Strategy> = match o.strategy_kind {
+            StrategyKind::Default => Box::new(DefaultStrategy::new(o.strategy.clone())),
+            StrategyKind::Mcmc => Box::new(McmcStrategy::new(o.mcmc.clone())),
+        };
+        self.backend.set_regularization(strategy.regularization())?;
         let scene = SceneInfo {
             extent: self.data.extent,
         };
@@ -153,8 +165,15 @@ impl Trainer<'_> {
                 rep.split += r.split;
                 rep.pruned += r.pruned;
                 rep.opacity_resets += r.opacity_reset as usize;
+                rep.relocated += r.relocated;
+                rep.added += r.added;
                 n_splats = ms.splats.len();
                 self.backend.upload(&ms.splats, &ms.adam)?;
+            }
+            if let Some(noise) =
+                strategy.means_noise(done, input.lr.means, mix_seed(o.seed, done as u64, 4))
+            {
+                self.backend.perturb_means(&noise)?;
             }
             recent.push((st.loss, st.psnr));
             if recent.len() > 100 {
