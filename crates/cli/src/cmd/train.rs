@@ -35,6 +35,16 @@ pub enum InitKind {
     Random,
 }
 
+/// Densification strategy (`--strategy`).
+#[derive(Debug, Clone, Copy, PartialEq, Eq, clap::ValueEnum)]
+pub enum StrategyArg {
+    /// INRIA adaptive density control (clone, split, prune, opacity reset).
+    Default,
+    /// 3DGS-MCMC (Kheradmand et al. 2024): relocate dead splats, grow 5% per
+    /// refinement up to min(1 000 000, --max-splats), position noise, L1 regularisers.
+    Mcmc,
+}
+
 /// Make a backend; says which on stderr.
 pub fn make_backend(kind: BackendKind, ctx: &Ctx) -> anyhow::Result<Box<dyn TrainBackend>> {
     let gpu = || splat::gpu::backend::GpuBackend::new(&splat::gpu::context::GpuOptions::default());
@@ -84,9 +94,12 @@ pub struct Args {
     /// Highest SH degree (0..=3).
     #[arg(long, default_value_t = 3)]
     pub sh_degree: u32,
-    /// Cap on the number of splats.
+    /// Cap on the number of splats (MCMC: its cap is min(1 000 000, this)).
     #[arg(long, default_value_t = 3_000_000)]
     pub max_splats: usize,
+    /// Densification strategy.
+    #[arg(long, value_enum, default_value_t = StrategyArg::Default)]
+    pub strategy: StrategyArg,
     /// Initialisation source.
     #[arg(long, value_enum, default_value_t = InitKind::Auto)]
     pub init: InitKind,
@@ -190,6 +203,17 @@ pub fn run(args: &Args, ctx: &Ctx) -> anyhow::Result<serde_json::Value> {
         strategy: splat::strategy::DefaultStrategyOptions {
             max_splats: args.max_splats,
             ..Default::default()
+        },
+        strategy_kind: match args.strategy {
+            StrategyArg::Default => splat::strategy::StrategyKind::Default,
+            StrategyArg::Mcmc => splat::strategy::StrategyKind::Mcmc,
+        },
+        mcmc: {
+            let d = splat::strategy::McmcStrategyOptions::default();
+            splat::strategy::McmcStrategyOptions {
+                cap_max: d.cap_max.min(args.max_splats),
+                ..d
+            }
         },
         ..Default::default()
     };
