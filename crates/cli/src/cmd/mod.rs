@@ -2,6 +2,7 @@
 
 pub mod bench_mask;
 pub mod bench_train;
+pub mod composite;
 pub mod demo;
 pub mod eval_masks;
 pub mod eval_poses;

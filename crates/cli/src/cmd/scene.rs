@@ -17,6 +17,8 @@ pub struct Args {
 pub enum SceneCommand {
     /// Render a synthetic scene from its TOML spec into a scene folder.
     Generate(GenerateArgs),
+    /// Paste moving DAVIS objects onto a real capture (On-the-go layout).
+    Composite(super::composite::Args),
 }
 
 /// `romosplat scene generate SPEC --out DIR`
@@ -35,6 +37,7 @@ pub struct GenerateArgs {
 /// Run `romosplat scene ...`.
 pub fn run(args: &Args, ctx: &Ctx) -> anyhow::Result<serde_json::Value> {
     match &args.command {
+        SceneCommand::Composite(c) => super::composite::run(c, ctx),
         SceneCommand::Generate(g) => {
             let mut spec = loader::synth::load_spec(&g.spec)?;
             if let Some(seed) = g.seed {
