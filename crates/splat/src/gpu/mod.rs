@@ -17,6 +17,7 @@ pub mod emit_keys;
 pub mod forward;
 pub mod kernel;
 pub mod loss;
+pub mod mcmc;
 pub mod prefix_sum;
 pub mod profile;
 pub mod project;
@@ -66,4 +67,6 @@ pub static ALL_KERNELS: &[&kernel::KernelDecl] = &[
     &adam::DECL,
     &loss::DECL,
     &densify_stats::DECL,
+    &mcmc::NOISE_DECL,
+    &mcmc::REG_DECL,
 ];
