@@ -12,9 +12,11 @@ use super::densify_stats::{DensifyStatsKernel, StatsArgs, StatsBuffers};
 use super::forward::{ForwardKernels, Timings, forward, upload_splats};
 use super::kernel::Recorder;
 use super::loss::{Loss, LossArgs, LossUniforms, blocks};
+use super::mcmc::McmcKernels;
 use super::project::ParamBuffers;
 use super::project_backward::GradBuffers;
 use super::{GpuContext, GpuError, GpuOptions};
+use crate::backend::{MeansNoise, Regularization};
 use crate::backend::{StepInput, StepStats, TrainBackend, check_step_input};
 use crate::error::{Result, SplatError};
 use crate::train::adam::AdamConfig;
@@ -53,6 +55,10 @@ pub struct GpuBackend {
     adam: Adam,
     loss: Loss,
     stats_k: DensifyStatsKernel,
+    /// MCMC position noise and regulariser kernels.
+    mcmc: McmcKernels,
+    /// MCMC regularisers added in every step.
+    reg: Regularization,
     state: Option<State>,
     views: HashMap<usize, ViewCache>,
     /// Adam hyper-parameters (INRIA defaults).
@@ -79,6 +85,8 @@ impl GpuBackend {
             adam: Adam::new(&ctx),
             loss: Loss::new(&ctx),
             stats_k: DensifyStatsKernel::new(&ctx),
+            mcmc: McmcKernels::new(&ctx),
+            reg: Regularization::default(),
             ctx,
             state: None,
             views: HashMap::new(),
@@ -248,6 +256,9 @@ impl TrainBackend for GpuBackend {
                 n: st.params.n,
             },
         )?;
+        // MCMC regularisers' gradients (nothing recorded when zero).
+        self.mcmc
+            .record_reg(ctx, &mut rec, &st.params, &st.grads, &self.reg)?;
         // Adam, every group (dense, as torch).
         st.step += 1;
         let c = &self.adam_config;
@@ -366,6 +377,22 @@ impl TrainBackend for GpuBackend {
             psnr: (10.0 * (1.0 / mse.max(1e-20)).log10()) as f32,
             visible,
         })
+    }
+
+    fn set_regularization(&mut self, reg: Regularization) -> Result<()> {
+        self.reg = reg;
+        Ok(())
+    }
+
+    fn perturb_means(&mut self, noise: &MeansNoise) -> Result<()> {
+        let Some(st) = self.state.as_ref() else {
+            return Err(SplatError::Invalid("perturb_means before upload".into()));
+        };
+        let mut rec = Recorder::new(&self.ctx, false);
+        self.mcmc
+            .record_noise(&self.ctx, &mut rec, &st.params, noise)?;
+        rec.finish()?;
+        Ok(())
     }
 
     fn download(&mut self) -> Result<(Splats, AdamState, DensifyStats)> {
