@@ -6,6 +6,8 @@ pub mod export;
 pub mod gpu;
 pub mod init;
 pub mod io;
+#[cfg(feature = "onnx")]
+pub mod lpips;
 pub mod metrics;
 pub mod reference;
 pub mod strategy;
