@@ -1,9 +1,15 @@
 // rasterize.wgsl — forward tile rasterizer (Kerbl et al. 2023 §6, INRIA
-// `renderCUDA`): one 16×16 workgroup per tile, the tile's depth-sorted splats
+// `renderCUDA`): one workgroup per 16×16 tile, the tile's depth-sorted splats
 // loaded into workgroup memory 256 at a time, front-to-back compositing per
 // pixel (α ≤ 0.99, α < 1/255 skipped, stop before T < 1e-4), background
 // weighted by the final transmittance. Writes what backward needs: final T
 // and the count of list entries up to the last contributor.
+// Each invocation owns PPT vertically adjacent pixels of the tile, so one
+// read of a splat from workgroup memory serves PPT pixels: on CPU drivers
+// (llvmpipe) every workgroup-memory read inside a loop is a per-lane gather,
+// and those reads, not the arithmetic, dominated the 1-pixel-per-invocation
+// kernel. The eight pixels are named `Px` values updated by an inlined
+// function (an indexed private array would become per-lane scratch memory).
 
 @group(0) @binding(0) var<uniform> cam: CameraUniforms;
 @group(0) @binding(1) var<storage, read> projected: array<ProjectedSplat>;
@@ -13,75 +19,135 @@
 @group(0) @binding(5) var<storage, read_write> final_t: array<f32>;
 @group(0) @binding(6) var<storage, read_write> last_contrib: array<u32>;
 
+const PPT: u32 = 8u;
+const THREADS: u32 = 32u; // 16 columns × (16 / PPT) rows
+
 var<workgroup> s_mean_op: array<vec4<f32>, 256>;  // mean x, mean y, opacity
 var<workgroup> s_conic: array<vec4<f32>, 256>;    // a, b, c
 var<workgroup> s_color: array<vec4<f32>, 256>;    // r, g, b
 var<workgroup> n_done: atomic<u32>;
 var<workgroup> all_done: u32;
 
-@compute @workgroup_size(16, 16)
+/// One pixel's compositing state.
+struct Px {
+    py: f32,
+    tr: f32,
+    col: vec3<f32>,
+    last: u32,
+    live: bool,
+}
+
+fn px_init(x: u32, y: u32) -> Px {
+    return Px(f32(y) + 0.5, 1.0, vec3<f32>(0.0), 0u, x < cam.width && y < cam.height);
+}
+
+/// Composite list entry `pos` (0-based in the tile list) at one pixel;
+/// returns 1 when this pixel just finished (T would fall below T_MIN).
+fn px_step(p: ptr<function, Px>, pos: u32, mo: vec4<f32>, conic: vec3<f32>, color: vec3<f32>, px: f32) -> u32 {
+    if (!(*p).live) {
+        return 0u;
+    }
+    let a = alpha_at(mo.xy, conic, mo.z, px, (*p).py);
+    if (a.x < 0.0) {
+        return 0u;
+    }
+    let tr = (*p).tr;
+    let next = tr * (1.0 - a.x);
+    if (next < T_MIN) {
+        (*p).live = false;
+        return 1u;
+    }
+    (*p).col += color * a.x * tr;
+    (*p).tr = next;
+    (*p).last = pos + 1u;
+    return 0u;
+}
+
+fn px_write(p: Px, x: u32, y: u32) {
+    if (x < cam.width && y < cam.height) {
+        let pix = y * cam.width + x;
+        let c = p.col + p.tr * cam.background.xyz;
+        image[3u * pix] = c.x;
+        image[3u * pix + 1u] = c.y;
+        image[3u * pix + 2u] = c.z;
+        final_t[pix] = p.tr;
+        last_contrib[pix] = p.last;
+    }
+}
+
+@compute @workgroup_size(16, 2)
 fn rasterize_main(@builtin(workgroup_id) wid: vec3<u32>, @builtin(local_invocation_id) lid3: vec3<u32>,
                   @builtin(local_invocation_index) lid: u32) {
     let tile = wid.y * cam.grid_x + wid.x;
     let x = wid.x * TILE_SIZE + lid3.x;
-    let y = wid.y * TILE_SIZE + lid3.y;
-    let inside = x < cam.width && y < cam.height;
+    let y0 = wid.y * TILE_SIZE + lid3.y * PPT;
     let px = f32(x) + 0.5;
-    let py = f32(y) + 0.5;
     let start = ranges[2u * tile];
     let end = max(ranges[2u * tile + 1u], start);
     if (lid == 0u) {
         atomicStore(&n_done, 0u);
     }
     workgroupBarrier();
-    var done = !inside;
+    var p0 = px_init(x, y0);
+    var p1 = px_init(x, y0 + 1u);
+    var p2 = px_init(x, y0 + 2u);
+    var p3 = px_init(x, y0 + 3u);
+    var p4 = px_init(x, y0 + 4u);
+    var p5 = px_init(x, y0 + 5u);
+    var p6 = px_init(x, y0 + 6u);
+    var p7 = px_init(x, y0 + 7u);
+    var n_live = u32(p0.live) + u32(p1.live) + u32(p2.live) + u32(p3.live)
+        + u32(p4.live) + u32(p5.live) + u32(p6.live) + u32(p7.live);
+    var done = n_live == 0u;
     if (done) {
         atomicAdd(&n_done, 1u);
     }
-    var tr = 1.0;
-    var col = vec3<f32>(0.0);
-    var last = 0u;
     for (var batch = start; batch < end; batch += TILE_PIXELS) {
         workgroupBarrier();
         if (lid == 0u) {
             all_done = atomicLoad(&n_done);
         }
-        if (workgroupUniformLoad(&all_done) == TILE_PIXELS) {
+        if (workgroupUniformLoad(&all_done) == THREADS) {
             break;
         }
-        let k = batch + lid;
-        if (k < end) {
-            let p = projected[tile_values[k]];
-            s_mean_op[lid] = vec4<f32>(p.mean_x, p.mean_y, p.opacity, 0.0);
-            s_conic[lid] = vec4<f32>(p.conic_a, p.conic_b, p.conic_c, 0.0);
-            s_color[lid] = vec4<f32>(p.color_r, p.color_g, p.color_b, 0.0);
+        for (var q = 0u; q < TILE_PIXELS / THREADS; q++) {
+            let idx = lid + THREADS * q;
+            let k = batch + idx;
+            if (k < end) {
+                let p = projected[tile_values[k]];
+                s_mean_op[idx] = vec4<f32>(p.mean_x, p.mean_y, p.opacity, 0.0);
+                s_conic[idx] = vec4<f32>(p.conic_a, p.conic_b, p.conic_c, 0.0);
+                s_color[idx] = vec4<f32>(p.color_r, p.color_g, p.color_b, 0.0);
+            }
         }
         workgroupBarrier();
         let count = min(TILE_PIXELS, end - batch);
         for (var j = 0u; j < count && !done; j++) {
             let mo = s_mean_op[j];
-            let a = alpha_at(mo.xy, s_conic[j].xyz, mo.z, px, py);
-            if (a.x < 0.0) {
-                continue;
-            }
-            let next = tr * (1.0 - a.x);
-            if (next < T_MIN) {
+            let conic = s_conic[j].xyz;
+            let color = s_color[j].xyz;
+            let pos = batch - start + j;
+            var ended = px_step(&p0, pos, mo, conic, color, px);
+            ended += px_step(&p1, pos, mo, conic, color, px);
+            ended += px_step(&p2, pos, mo, conic, color, px);
+            ended += px_step(&p3, pos, mo, conic, color, px);
+            ended += px_step(&p4, pos, mo, conic, color, px);
+            ended += px_step(&p5, pos, mo, conic, color, px);
+            ended += px_step(&p6, pos, mo, conic, color, px);
+            ended += px_step(&p7, pos, mo, conic, color, px);
+            n_live -= ended;
+            if (n_live == 0u) {
                 done = true;
                 atomicAdd(&n_done, 1u);
-                break;
             }
-            col += s_color[j].xyz * a.x * tr;
-            tr = next;
-            last = batch - start + j + 1u;
         }
     }
-    if (inside) {
-        let pix = y * cam.width + x;
-        col += tr * cam.background.xyz;
-        image[3u * pix] = col.x;
-        image[3u * pix + 1u] = col.y;
-        image[3u * pix + 2u] = col.z;
-        final_t[pix] = tr;
-        last_contrib[pix] = last;
-    }
+    px_write(p0, x, y0);
+    px_write(p1, x, y0 + 1u);
+    px_write(p2, x, y0 + 2u);
+    px_write(p3, x, y0 + 3u);
+    px_write(p4, x, y0 + 4u);
+    px_write(p5, x, y0 + 5u);
+    px_write(p6, x, y0 + 6u);
+    px_write(p7, x, y0 + 7u);
 }

@@ -6,9 +6,14 @@
 // conic, opacity, colour) per splat with `grad_add` (float atomics or a CAS
 // loop, chosen by the host). `grads` uses the `ProjectedGrads` layout: 12
 // floats per splat (mean2d 0..2, conic 4..7, opacity 7, colour 8..11).
-// Each invocation owns PPT vertically adjacent pixels of the tile and sums
+// Each invocation owns PPT = 8 vertically adjacent pixels of the tile and sums
 // their contributions to a splat in registers before one set of atomics, so
-// the atomic count drops by up to PPT (atomics dominate on CPU drivers).
+// the atomic count drops by up to PPT (atomics dominate on CPU drivers);
+// the per-pixel state lives in eight named `Px` values updated by an inlined
+// function (a hand-unrolled loop: an indexed private array would become
+// per-lane scratch memory on llvmpipe);
+// with subgroups, `grad_acc` further sums over the subgroup's lanes before
+// one atomic per subgroup (see `kernel::GRAD_SUBGROUP_WGSL`).
 // Traversal starts at the largest `last_contrib` of the tile.
 
 @group(0) @binding(0) var<uniform> cam: CameraUniforms;
@@ -20,7 +25,8 @@
 @group(0) @binding(6) var<storage, read> v_image: array<f32>;
 @group(0) @binding(7) var<storage, read_write> grads: array<GradAtomic>;
 
-const PPT: u32 = 4u;
+const PPT: u32 = 8u;
+const THREADS: u32 = 32u; // 16 columns × (16 / PPT) rows
 
 var<workgroup> s_id: array<u32, 256>;
 var<workgroup> s_mean_op: array<vec4<f32>, 256>;
@@ -29,7 +35,84 @@ var<workgroup> s_color: array<vec4<f32>, 256>;
 var<workgroup> wg_max_last: atomic<u32>;
 var<workgroup> wg_last: u32;
 
-@compute @workgroup_size(16, 4)
+/// One pixel's backward state (reverse traversal).
+struct Px {
+    py: f32,
+    t_final: f32,
+    // List entries up to the last contributor (0 outside the image).
+    last: u32,
+    v_pix: vec3<f32>,
+    bg_dot: f32,
+    tr: f32,
+    behind: vec3<f32>,
+    last_alpha: f32,
+    last_color: vec3<f32>,
+}
+
+/// One invocation's gradient sums for the current splat.
+struct Acc {
+    mean: vec2<f32>,
+    conic: vec3<f32>,
+    op: f32,
+    col: vec3<f32>,
+    touched: bool,
+}
+
+fn px_init(x: u32, y: u32) -> Px {
+    var p: Px;
+    p.py = f32(y) + 0.5;
+    p.t_final = 0.0;
+    p.last = 0u;
+    p.v_pix = vec3<f32>(0.0);
+    if (x < cam.width && y < cam.height) {
+        let pix = y * cam.width + x;
+        p.t_final = final_t[pix];
+        p.last = last_contrib[pix];
+        p.v_pix = vec3<f32>(v_image[3u * pix], v_image[3u * pix + 1u], v_image[3u * pix + 2u]);
+    }
+    p.bg_dot = dot(cam.background.xyz, p.v_pix);
+    p.tr = p.t_final;
+    p.behind = vec3<f32>(0.0);
+    p.last_alpha = 0.0;
+    p.last_color = vec3<f32>(0.0);
+    return p;
+}
+
+/// Undo list entry `k_rel` (splat `mo`/`conic`/`color`) at one pixel and add
+/// its gradient contributions to `acc`.
+fn px_step(p: ptr<function, Px>, acc: ptr<function, Acc>, k_rel: u32, mo: vec4<f32>, conic: vec3<f32>,
+           color: vec3<f32>, px: f32) {
+    if (k_rel >= (*p).last) {
+        return;
+    }
+    let a = alpha_at(mo.xy, conic, mo.z, px, (*p).py);
+    if (a.x < 0.0) {
+        return;
+    }
+    let alpha = a.x;
+    let g = a.y;
+    let dx = a.z;
+    let dy = a.w;
+    let tr = (*p).tr / (1.0 - alpha);
+    (*p).tr = tr;
+    let behind = (*p).last_alpha * (*p).last_color + (1.0 - (*p).last_alpha) * (*p).behind;
+    (*p).behind = behind;
+    (*p).last_color = color;
+    (*p).last_alpha = alpha;
+    let v_pix = (*p).v_pix;
+    let v_alpha = dot(color - behind, v_pix) * tr - (*p).t_final / (1.0 - alpha) * (*p).bg_dot;
+    (*acc).col += alpha * tr * v_pix;
+    (*acc).touched = true;
+    if (mo.z * g >= ALPHA_MAX) {
+        return;
+    }
+    (*acc).op += g * v_alpha;
+    let v_power = g * (mo.z * v_alpha);
+    (*acc).mean += v_power * vec2<f32>(-(conic.x * dx + conic.y * dy), -(conic.z * dy + conic.y * dx));
+    (*acc).conic += v_power * vec3<f32>(-0.5 * dx * dx, -dx * dy, -0.5 * dy * dy);
+}
+
+@compute @workgroup_size(16, 2)
 fn rasterize_backward_main(@builtin(workgroup_id) wid: vec3<u32>, @builtin(local_invocation_id) lid3: vec3<u32>,
                            @builtin(local_invocation_index) lid: u32) {
     let tile = wid.y * cam.grid_x + wid.x;
@@ -38,35 +121,16 @@ fn rasterize_backward_main(@builtin(workgroup_id) wid: vec3<u32>, @builtin(local
     let px = f32(x) + 0.5;
     let start = ranges[2u * tile];
     let end = max(ranges[2u * tile + 1u], start);
-    var inside: array<bool, 4>;
-    var t_final: array<f32, 4>;
-    var last: array<u32, 4>;
-    var v_pix: array<vec3<f32>, 4>;
-    var bg_dot: array<f32, 4>;
-    var tr: array<f32, 4>;
-    var behind: array<vec3<f32>, 4>;
-    var last_alpha: array<f32, 4>;
-    var last_color: array<vec3<f32>, 4>;
-    var my_max = 0u;
-    for (var r = 0u; r < PPT; r++) {
-        let y = y0 + r;
-        inside[r] = x < cam.width && y < cam.height;
-        t_final[r] = 0.0;
-        last[r] = 0u;
-        v_pix[r] = vec3<f32>(0.0);
-        if (inside[r]) {
-            let pix = y * cam.width + x;
-            t_final[r] = final_t[pix];
-            last[r] = last_contrib[pix];
-            v_pix[r] = vec3<f32>(v_image[3u * pix], v_image[3u * pix + 1u], v_image[3u * pix + 2u]);
-        }
-        bg_dot[r] = dot(cam.background.xyz, v_pix[r]);
-        tr[r] = t_final[r];
-        behind[r] = vec3<f32>(0.0);
-        last_alpha[r] = 0.0;
-        last_color[r] = vec3<f32>(0.0);
-        my_max = max(my_max, last[r]);
-    }
+    var p0 = px_init(x, y0);
+    var p1 = px_init(x, y0 + 1u);
+    var p2 = px_init(x, y0 + 2u);
+    var p3 = px_init(x, y0 + 3u);
+    var p4 = px_init(x, y0 + 4u);
+    var p5 = px_init(x, y0 + 5u);
+    var p6 = px_init(x, y0 + 6u);
+    var p7 = px_init(x, y0 + 7u);
+    let my_max = max(max(max(p0.last, p1.last), max(p2.last, p3.last)),
+                     max(max(p4.last, p5.last), max(p6.last, p7.last)));
     if (lid == 0u) {
         atomicStore(&wg_max_last, 0u);
     }
@@ -86,8 +150,8 @@ fn rasterize_backward_main(@builtin(workgroup_id) wid: vec3<u32>, @builtin(local
         let batch_lo = max(start, select(0u, batch_hi - TILE_PIXELS, batch_hi >= TILE_PIXELS));
         let count = batch_hi - batch_lo;
         workgroupBarrier();
-        for (var q = 0u; q < TILE_PIXELS / 64u; q++) {
-            let idx = lid + 64u * q;
+        for (var q = 0u; q < TILE_PIXELS / THREADS; q++) {
+            let idx = lid + THREADS * q;
             if (idx < count) {
                 let k = batch_hi - 1u - idx;
                 let id = tile_values[k];
@@ -99,58 +163,41 @@ fn rasterize_backward_main(@builtin(workgroup_id) wid: vec3<u32>, @builtin(local
             }
         }
         workgroupBarrier();
+        // No early exit in this loop: it stays subgroup-uniform for
+        // `grad_acc` (entries at or past a pixel's `last` are skipped in
+        // `px_step`).
         for (var j = 0u; j < count; j++) {
             let k_rel = batch_hi - 1u - j - start; // position in the tile list
-            if (k_rel >= my_max) {
-                continue;
-            }
             let mo = s_mean_op[j];
             let conic = s_conic[j].xyz;
             let color = s_color[j].xyz;
-            var g_mean = vec2<f32>(0.0);
-            var g_conic = vec3<f32>(0.0);
-            var g_op = 0.0;
-            var g_col = vec3<f32>(0.0);
-            var touched = false;
-            for (var r = 0u; r < PPT; r++) {
-                if (!inside[r] || k_rel >= last[r]) {
-                    continue;
-                }
-                let a = alpha_at(mo.xy, conic, mo.z, px, f32(y0 + r) + 0.5);
-                if (a.x < 0.0) {
-                    continue;
-                }
-                let alpha = a.x;
-                let g = a.y;
-                let dx = a.z;
-                let dy = a.w;
-                tr[r] = tr[r] / (1.0 - alpha);
-                behind[r] = last_alpha[r] * last_color[r] + (1.0 - last_alpha[r]) * behind[r];
-                last_color[r] = color;
-                var v_alpha = dot(color - behind[r], v_pix[r]) * tr[r];
-                last_alpha[r] = alpha;
-                v_alpha += -t_final[r] / (1.0 - alpha) * bg_dot[r];
-                g_col += alpha * tr[r] * v_pix[r];
-                touched = true;
-                if (mo.z * g >= ALPHA_MAX) {
-                    continue;
-                }
-                g_op += g * v_alpha;
-                let v_power = g * (mo.z * v_alpha);
-                g_mean += v_power * vec2<f32>(-(conic.x * dx + conic.y * dy), -(conic.z * dy + conic.y * dx));
-                g_conic += v_power * vec3<f32>(-0.5 * dx * dx, -dx * dy, -0.5 * dy * dy);
+            var acc: Acc;
+            acc.mean = vec2<f32>(0.0);
+            acc.conic = vec3<f32>(0.0);
+            acc.op = 0.0;
+            acc.col = vec3<f32>(0.0);
+            acc.touched = false;
+            if (k_rel < my_max) {
+                px_step(&p0, &acc, k_rel, mo, conic, color, px);
+                px_step(&p1, &acc, k_rel, mo, conic, color, px);
+                px_step(&p2, &acc, k_rel, mo, conic, color, px);
+                px_step(&p3, &acc, k_rel, mo, conic, color, px);
+                px_step(&p4, &acc, k_rel, mo, conic, color, px);
+                px_step(&p5, &acc, k_rel, mo, conic, color, px);
+                px_step(&p6, &acc, k_rel, mo, conic, color, px);
+                px_step(&p7, &acc, k_rel, mo, conic, color, px);
             }
-            if (touched) {
+            if (grad_any(acc.touched)) {
                 let base = 12u * s_id[j];
-                grad_add(base + 0u, g_mean.x);
-                grad_add(base + 1u, g_mean.y);
-                grad_add(base + 4u, g_conic.x);
-                grad_add(base + 5u, g_conic.y);
-                grad_add(base + 6u, g_conic.z);
-                grad_add(base + 7u, g_op);
-                grad_add(base + 8u, g_col.x);
-                grad_add(base + 9u, g_col.y);
-                grad_add(base + 10u, g_col.z);
+                grad_acc(base + 0u, acc.mean.x, lid);
+                grad_acc(base + 1u, acc.mean.y, lid);
+                grad_acc(base + 4u, acc.conic.x, lid);
+                grad_acc(base + 5u, acc.conic.y, lid);
+                grad_acc(base + 6u, acc.conic.z, lid);
+                grad_acc(base + 7u, acc.op, lid);
+                grad_acc(base + 8u, acc.col.x, lid);
+                grad_acc(base + 9u, acc.col.y, lid);
+                grad_acc(base + 10u, acc.col.z, lid);
             }
         }
         batch_hi = batch_lo;

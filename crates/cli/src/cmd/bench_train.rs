@@ -37,6 +37,10 @@ pub struct Args {
     pub downscale: u32,
     #[arg(long, value_enum, default_value_t = Which::All)]
     pub backend: Which,
+    /// Also print a per-kernel profile of the wgpu step (timestamp queries,
+    /// median ms per step) plus host sections.
+    #[arg(long)]
+    pub profile: bool,
 }
 
 pub fn run(args: &Args, ctx: &Ctx) -> anyhow::Result<serde_json::Value> {
@@ -119,5 +123,31 @@ pub fn run(args: &Args, ctx: &Ctx) -> anyhow::Result<serde_json::Value> {
         ctx.info(r.to_string());
         results.push(r);
     }
-    Ok(serde_json::json!({ "scene": root, "results": results }))
+    let mut out = serde_json::json!({ "scene": root, "results": results });
+    if args.profile && args.backend != Which::Cpu {
+        let v = &views[0];
+        let input = StepInput {
+            camera: &v.camera,
+            target: &v.image,
+            mask: v.mask.as_deref(),
+            view_id: Some(v.index),
+            lr: opts.learning_rates(0, extent),
+            loss: LossConfig::default(),
+            render: RenderOptions {
+                sh_degree: 3,
+                ..Default::default()
+            },
+        };
+        let prof = splat::gpu::profile_step(&start.splats, &input, 2, args.steps.max(1) as usize)?;
+        let map: serde_json::Map<String, serde_json::Value> = prof
+            .into_iter()
+            .map(|(k, ms)| (k, serde_json::json!((ms * 1000.0).round() / 1000.0)))
+            .collect();
+        ctx.info(format!(
+            "profile (ms per step, medians): {}",
+            serde_json::Value::Object(map.clone())
+        ));
+        out["profile_ms"] = serde_json::Value::Object(map);
+    }
+    Ok(out)
 }

@@ -196,7 +196,10 @@ impl TrainBackend for GpuBackend {
         let partials = ctx.storage("loss_partials", blocks(pixels) as u64 * 8);
         if lambda > 0.0 {
             // D-SSIM on the CPU from a readback (exactly the CPU backend's loss).
+            let t_read = std::time::Instant::now();
             let image: Vec<f32> = ctx.read(&fs.image, pixels as usize * 3)?;
+            timings.push(("host:image_readback", t_read.elapsed().as_secs_f64() * 1e3));
+            let t_ssim = std::time::Instant::now();
             let (lv, grad) = crate::train::loss::loss_and_grad(
                 &image,
                 input.target,
@@ -207,6 +210,7 @@ impl TrainBackend for GpuBackend {
             ctx.queue
                 .write_buffer(&v_image, 0, bytemuck::cast_slice(&grad));
             (l1, mse, ssim, loss) = (lv.l1, lv.mse, lv.ssim, lv.loss);
+            timings.push(("host:ssim_cpu+upload", t_ssim.elapsed().as_secs_f64() * 1e3));
         } else {
             let scale = if view.kept > 0.0 {
                 (1.0 - lambda) / (3.0 * view.kept)
@@ -353,7 +357,13 @@ impl TrainBackend for GpuBackend {
                 },
             )?;
         }
+        let t_sub = std::time::Instant::now();
         timings.extend(rec.finish()?);
+        timings.push((
+            "host:backward_submit_wait",
+            t_sub.elapsed().as_secs_f64() * 1e3,
+        ));
+        let t_stats = std::time::Instant::now();
         if lambda <= 0.0 {
             let parts: Vec<f32> = ctx.read(&partials, blocks(pixels) as usize * 2)?;
             let norm = if view.kept > 0.0 {
@@ -369,6 +379,7 @@ impl TrainBackend for GpuBackend {
             loss = l1;
         }
         let visible: u32 = ctx.read::<u32>(&st.stats.visible, 1)?[0];
+        timings.push(("host:stats_readback", t_stats.elapsed().as_secs_f64() * 1e3));
         self.timings = timings;
         Ok(StepStats {
             loss: loss as f32,

@@ -18,6 +18,9 @@ pub struct GpuOptions {
     /// Use the compare-and-swap loop for gradient accumulation even when the
     /// adapter has `SHADER_FLOAT32_ATOMIC` (tests force this to cover the GL path).
     pub force_cas_atomics: bool,
+    /// Do not use subgroup operations even when the adapter has
+    /// `SUBGROUP` (tests force this to cover the plain-atomics path).
+    pub no_subgroups: bool,
     /// Request timestamp queries when the adapter has them (for profiling).
     pub timestamps: bool,
 }
@@ -30,6 +33,9 @@ pub struct GpuContext {
     pub adapter_info: wgpu::AdapterInfo,
     /// True when gradient accumulation uses native `atomicAdd` on `f32`.
     pub float_atomics: bool,
+    /// True when gradient kernels reduce over the subgroup before their
+    /// atomics (`SUBGROUP` feature).
+    pub subgroups: bool,
     /// True when timestamp queries were enabled.
     pub timestamps: bool,
     /// Device limits in force.
@@ -42,6 +48,7 @@ impl std::fmt::Debug for GpuContext {
             .field("adapter", &self.adapter_info.name)
             .field("backend", &self.adapter_info.backend)
             .field("float_atomics", &self.float_atomics)
+            .field("subgroups", &self.subgroups)
             .field("timestamps", &self.timestamps)
             .finish()
     }
@@ -64,7 +71,11 @@ impl GpuContext {
         let float_atomics =
             !opts.force_cas_atomics && features.contains(wgpu::Features::SHADER_FLOAT32_ATOMIC);
         let timestamps = opts.timestamps && features.contains(wgpu::Features::TIMESTAMP_QUERY);
+        let subgroups = !opts.no_subgroups && features.contains(wgpu::Features::SUBGROUP);
         let mut required = wgpu::Features::empty();
+        if subgroups {
+            required |= wgpu::Features::SUBGROUP;
+        }
         if float_atomics {
             required |= wgpu::Features::SHADER_FLOAT32_ATOMIC;
         }
@@ -95,6 +106,7 @@ impl GpuContext {
             queue,
             adapter_info: adapter.get_info(),
             float_atomics,
+            subgroups,
             timestamps,
             limits,
         })

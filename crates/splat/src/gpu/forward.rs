@@ -178,8 +178,15 @@ pub fn forward(
             n,
         },
     )?;
+    let t_sub = std::time::Instant::now();
     timings.extend(rec.finish()?);
+    timings.push((
+        "host:forward1_submit_wait",
+        t_sub.elapsed().as_secs_f64() * 1e3,
+    ));
+    let t_read = std::time::Instant::now();
     let total: u64 = ctx.read_at::<u32>(&offsets, n as usize, 1)?[0] as u64;
+    timings.push(("host:count_readback", t_read.elapsed().as_secs_f64() * 1e3));
     if total * 4 > ctx.max_binding_bytes() {
         return Err(GpuError::InvalidInput(format!(
             "{total} tile intersections exceed the device's storage binding limit"
@@ -237,7 +244,12 @@ pub fn forward(
             grid,
         },
     )?;
+    let t_sub = std::time::Instant::now();
     timings.extend(rec.finish()?);
+    timings.push((
+        "host:forward2_submit_wait",
+        t_sub.elapsed().as_secs_f64() * 1e3,
+    ));
     Ok((
         ForwardState {
             cam: cam_buf,

@@ -65,9 +65,26 @@ fn grad_add(i: u32, v: f32) {\n\
     }\n\
 }\n";
 
-/// The full WGSL module text for a kernel and atomics variant.
-pub fn shader_source(decl: &KernelDecl, float_atomics: bool) -> String {
+/// Subgroup-reduced gradient accumulation: `grad_acc` sums `v` over the
+/// subgroup (8 lanes on llvmpipe) and one lane issues the atomic, so a splat
+/// costs one atomic per subgroup instead of one per invocation (atomics are
+/// scalarised, CAS-looped per lane on CPU drivers). Both functions must be
+/// called in subgroup-uniform control flow with a subgroup-uniform `i`;
+/// `lane` is any per-invocation unique id (the first active lane issues).
+pub const GRAD_SUBGROUP_WGSL: &str = "fn grad_any(b: bool) -> bool { return subgroupAny(b); }\n\
+fn grad_acc(i: u32, v: f32, lane: u32) {\n\
+    let s = subgroupAdd(v);\n\
+    if (lane == subgroupBroadcastFirst(lane)) { grad_add(i, s); }\n\
+}\n";
+/// Without subgroups every invocation issues its own atomics.
+pub const GRAD_PLAIN_WGSL: &str = "fn grad_any(b: bool) -> bool { return b; }\n\
+fn grad_acc(i: u32, v: f32, lane: u32) { grad_add(i, v); }\n";
+
+/// The full WGSL module text for a kernel, atomics variant and subgroup
+/// variant (`subgroups` only matters for kernels with gradient atomics).
+pub fn shader_source(decl: &KernelDecl, float_atomics: bool, subgroups: bool) -> String {
     let mut s = String::with_capacity(COMMON_WGSL.len() + decl.source.len() + 512);
+    let subgroups = subgroups && decl.uses_grad_atomics;
     s.push_str(COMMON_WGSL);
     s.push('\n');
     if decl.uses_grad_atomics {
@@ -75,6 +92,12 @@ pub fn shader_source(decl: &KernelDecl, float_atomics: bool) -> String {
             ATOMIC_FLOAT_WGSL
         } else {
             ATOMIC_CAS_WGSL
+        });
+        s.push('\n');
+        s.push_str(if subgroups {
+            GRAD_SUBGROUP_WGSL
+        } else {
+            GRAD_PLAIN_WGSL
         });
         s.push('\n');
     }
@@ -131,7 +154,9 @@ impl Kernel {
             .device
             .create_shader_module(wgpu::ShaderModuleDescriptor {
                 label: Some(decl.name),
-                source: wgpu::ShaderSource::Wgsl(shader_source(decl, ctx.float_atomics).into()),
+                source: wgpu::ShaderSource::Wgsl(
+                    shader_source(decl, ctx.float_atomics, ctx.subgroups).into(),
+                ),
             });
         let pipelines = decl
             .entry_points

@@ -25,7 +25,9 @@ fn median(v: &mut [f64]) -> f64 {
 
 /// Run `warmup` + `steps` training steps of `splats` on `input` and return
 /// `(kernel entry point, median ms per step)` sorted by time (largest first),
-/// plus `"step_wall"`: the median wall-clock time of a whole step.
+/// plus `"kernels_total"` (Σ of the kernel medians) and `"step_wall"`: the
+/// median wall-clock time of a whole step. Entries named `host:*` are
+/// wall-clock host sections (submit + wait, readbacks, CPU work) of a step.
 /// Fails with `GpuError::InvalidInput` when the device lacks timestamp queries.
 pub fn profile_step(
     splats: &Splats,
@@ -74,6 +76,12 @@ pub fn profile_step(
         })
         .collect();
     out.sort_by(|a, b| b.1.total_cmp(&a.1));
+    let kernels: f64 = out
+        .iter()
+        .filter(|(k, _)| !k.starts_with("host:"))
+        .map(|(_, v)| v)
+        .sum();
+    out.push(("kernels_total".to_string(), kernels));
     out.push(("step_wall".to_string(), median(&mut wall)));
     Ok(out)
 }

@@ -1,13 +1,16 @@
 //! Host for `shaders/splat/rasterize.wgsl`: the forward tile rasterizer
 //! (Kerbl et al. 2023 §6; reference `reference::rasterize::rasterize_t`).
-//! One 16×16 workgroup per tile.
+//! One workgroup per 16×16 tile, several pixels per invocation.
 
 use super::kernel::{BindingDecl, BindingKind, Kernel, KernelDecl, Recorder};
 use super::project::CameraUniforms;
 use super::{GpuContext, GpuError};
 
-/// Workgroup size (one tile).
-pub const WORKGROUP_SIZE: [u32; 2] = [16, 16];
+/// Workgroup size: one 16×16 tile, each invocation owning a column of
+/// `PIXELS_PER_THREAD` pixels.
+pub const WORKGROUP_SIZE: [u32; 2] = [16, 2];
+/// Vertically adjacent pixels per invocation (`PPT` in the shader).
+pub const PIXELS_PER_THREAD: u32 = 8;
 
 pub static DECL: KernelDecl = KernelDecl {
     name: "rasterize",

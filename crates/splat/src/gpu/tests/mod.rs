@@ -30,18 +30,21 @@ pub(crate) fn ctx() -> Option<&'static GpuContext> {
     C.get_or_init(|| {
         open(&GpuOptions {
             force_cas_atomics: false,
+            no_subgroups: false,
             timestamps: true,
         })
     })
     .as_ref()
 }
 
-/// Shared context forced onto the compare-and-swap atomics path.
+/// Shared context forced onto the compare-and-swap atomics path without
+/// subgroup reductions (the GL / no-subgroup path).
 pub(crate) fn ctx_cas() -> Option<&'static GpuContext> {
     static C: OnceLock<Option<GpuContext>> = OnceLock::new();
     C.get_or_init(|| {
         open(&GpuOptions {
             force_cas_atomics: true,
+            no_subgroups: true,
             timestamps: false,
         })
     })

@@ -15,8 +15,8 @@ fn shaders_match_host_binding_tables() {
         } else {
             &[false]
         };
-        for &float_atomics in variants {
-            let src = shader_source(decl, float_atomics);
+        for (&float_atomics, subgroups) in variants.iter().flat_map(|a| [(a, false), (a, true)]) {
+            let src = shader_source(decl, float_atomics, subgroups);
             let module = naga::front::wgsl::parse_str(&src)
                 .unwrap_or_else(|e| panic!("{}: {}", decl.name, e.emit_to_string(&src)));
             naga::valid::Validator::new(
@@ -24,7 +24,12 @@ fn shaders_match_host_binding_tables() {
                 naga::valid::Capabilities::all(),
             )
             .validate(&module)
-            .unwrap_or_else(|e| panic!("{} (float_atomics={float_atomics}): {e:?}", decl.name));
+            .unwrap_or_else(|e| {
+                panic!(
+                    "{} (float_atomics={float_atomics}, subgroups={subgroups}): {e:?}",
+                    decl.name
+                )
+            });
             let mut seen = Vec::new();
             for (_, var) in module.global_variables.iter() {
                 let Some(rb) = &var.binding else { continue };
