@@ -112,6 +112,10 @@ pub struct Args {
     /// Write a checkpoint every N steps (0 = only at the end).
     #[arg(long, default_value_t = 0)]
     pub checkpoint_every: u32,
+    /// Stop after this many minutes of training (0 = no limit); the summary
+    /// reports the steps actually done.
+    #[arg(long, default_value_t = 0.0)]
+    pub max_minutes: f64,
     /// Resume from this checkpoint.bin.
     #[arg(long)]
     pub resume: Option<PathBuf>,
@@ -194,6 +198,7 @@ pub fn run(args: &Args, ctx: &Ctx) -> anyhow::Result<serde_json::Value> {
         antialiased: args.antialiased,
         use_masks: !args.no_masks,
         checkpoint_every: args.checkpoint_every,
+        time_limit_s: args.max_minutes * 60.0,
         seed: args.seed,
         init: match args.init {
             InitKind::Auto => InitMode::Auto,

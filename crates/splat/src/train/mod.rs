@@ -118,6 +118,7 @@ impl Trainer<'_> {
         let mut recent: Vec<(f32, f32)> = Vec::new();
         let mut perm: Vec<usize> = Vec::new();
         let mut perm_epoch = u64::MAX;
+        let mut last_step = start.step;
         for s in start.step..o.steps {
             let epoch = s as u64 / nv as u64;
             if epoch != perm_epoch {
@@ -203,10 +204,14 @@ impl Trainer<'_> {
                     },
                 )?;
             }
+            last_step = done;
+            if o.time_limit_s > 0.0 && t0.elapsed().as_secs_f64() >= o.time_limit_s {
+                break;
+            }
         }
         let (splats, adam, _) = self.backend.download()?;
         let end = Checkpoint {
-            step: o.steps.max(start.step),
+            step: last_step.max(start.step),
             splats,
             adam,
         };

@@ -73,6 +73,11 @@ pub struct TrainOptions {
     pub use_masks: bool,
     /// Write a checkpoint every N steps (0 = only at the end).
     pub checkpoint_every: u32,
+    /// Wall-clock budget in seconds (0 = none): training stops after the
+    /// first step that ends past it, and the report gives the steps done.
+    /// The learning-rate schedule stays that of a `steps`-long run.
+    #[serde(default)]
+    pub time_limit_s: f64,
     /// Random seed (view order, split sampling, random init and background).
     pub seed: u64,
 }
@@ -103,6 +108,7 @@ impl Default for TrainOptions {
             init_max_moving_fraction: 0.5,
             use_masks: true,
             checkpoint_every: 0,
+            time_limit_s: 0.0,
             seed: 42,
         }
     }
@@ -129,6 +135,9 @@ impl TrainOptions {
         }
         if self.sh_degree > crate::types::MAX_SH_DEGREE {
             return bad(format!("sh_degree {} > 3", self.sh_degree));
+        }
+        if !(self.time_limit_s.is_finite() && self.time_limit_s >= 0.0) {
+            return bad(format!("time_limit_s {} must be >= 0", self.time_limit_s));
         }
         if self.sh_degree_every == 0 {
             return bad("sh_degree_every must be > 0".into());
