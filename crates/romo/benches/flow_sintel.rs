@@ -24,6 +24,18 @@ fn read_flo(p: &Path) -> Flow {
     }
 }
 
+/// Middlebury .flo writer (for looking at results; `DUMP_DIR`).
+fn write_flo(p: &Path, f: &Flow) {
+    let mut b = b"PIEH".to_vec();
+    b.extend((f.w() as u32).to_le_bytes());
+    b.extend((f.h() as u32).to_le_bytes());
+    for i in 0..f.u.data.len() {
+        b.extend(f.u.data[i].to_le_bytes());
+        b.extend(f.v.data[i].to_le_bytes());
+    }
+    std::fs::write(p, b).unwrap();
+}
+
 fn gray(p: &Path) -> Plane {
     let img = image::open(p).unwrap().to_rgb32f();
     romo::plane::Rgb::from_image(&img).gray()
@@ -46,11 +58,21 @@ fn main() {
         .ok()
         .and_then(|s| s.parse().ok())
         .unwrap_or(3);
-    let dis = Dis::default();
+    // DIS_OPTS: a partial DisOptions JSON (experiments); PAIRS: a
+    // comma-separated list of name prefixes to run.
+    let opts: romo::flow::dis::DisOptions = match std::env::var("DIS_OPTS") {
+        Ok(s) => serde_json::from_str(&s).unwrap(),
+        Err(_) => Default::default(),
+    };
+    let filter: Vec<String> = std::env::var("PAIRS")
+        .map(|s| s.split(',').map(String::from).collect())
+        .unwrap_or_default();
+    let dis = Dis::new(opts.clone());
     let mut names: Vec<_> = std::fs::read_dir(&dir)
         .unwrap()
         .map(|e| e.unwrap().file_name().into_string().unwrap())
         .collect();
+    names.retain(|n| filter.is_empty() || filter.iter().any(|f| n.starts_with(f.as_str())));
     names.sort();
     let mut rows = Vec::new();
     for n in names {
@@ -68,6 +90,9 @@ fn main() {
         }
         times.sort_by(|x, y| x.partial_cmp(y).unwrap());
         let est = est.unwrap();
+        if let Ok(dump) = std::env::var("DUMP_DIR") {
+            write_flo(&Path::new(&dump).join(format!("{n}.flo")), &est);
+        }
         let small = n.starts_with("alley") || n.starts_with("cave");
         rows.push(serde_json::json!({
             "pair": n, "small_motion": small,
@@ -84,7 +109,7 @@ fn main() {
         v.iter().sum::<f64>() / v.len().max(1) as f64
     };
     let out = serde_json::json!({
-        "method": "romo DIS (default options)", "threads": rayon::current_num_threads(),
+        "method": "romo DIS", "options": opts, "threads": rayon::current_num_threads(),
         "small": {"epe_all": mean(true, "epe_all"), "epe_noc": mean(true, "epe_noc"), "ms": mean(true, "ms_median")},
         "large": {"epe_all": mean(false, "epe_all"), "epe_noc": mean(false, "epe_noc"), "ms": mean(false, "ms_median")},
         "pairs": rows,

@@ -9,6 +9,7 @@ pub mod dis;
 pub mod variational;
 
 use crate::plane::Plane;
+use rayon::prelude::*;
 
 /// A dense flow field: pixel (x, y) of the first frame moves to
 /// (x + u, y + v) in the second. Units: pixels of the frames' resolution.
@@ -39,14 +40,50 @@ impl Flow {
         self.u.h
     }
 
-    /// Resample to a new resolution, scaling the vectors accordingly.
+    /// Resample to a new resolution, scaling the vectors accordingly
+    /// (bilinear, pixel-centre aligned, clamped borders; box-averaged first
+    /// when shrinking by more than 2×, as [`Plane::resize`]).
     pub fn resize(&self, nw: usize, nh: usize) -> Flow {
         let sx = nw as f32 / self.w() as f32;
         let sy = nh as f32 / self.h() as f32;
-        Flow {
-            u: self.u.resize(nw, nh).map(|a| a * sx),
-            v: self.v.resize(nw, nh).map(|a| a * sy),
+        if nw == self.w() && nh == self.h() {
+            return self.clone();
         }
+        if 2 * nw < self.w() || 2 * nh < self.h() {
+            return Flow {
+                u: self.u.resize(nw, nh).map(|a| a * sx),
+                v: self.v.resize(nw, nh).map(|a| a * sy),
+            };
+        }
+        let (w, h) = (self.w(), self.h());
+        let (ix, iy) = (w as f32 / nw as f32, h as f32 / nh as f32);
+        let mut out = Flow::zeros(nw, nh);
+        out.u
+            .data
+            .par_chunks_mut(nw)
+            .zip(out.v.data.par_chunks_mut(nw))
+            .enumerate()
+            .for_each(|(y, (ru, rv))| {
+                let fy = ((y as f32 + 0.5) * iy - 0.5).clamp(0.0, (h - 1) as f32);
+                let y0 = fy as usize;
+                let ay = fy - y0 as f32;
+                let y1 = (y0 + 1).min(h - 1);
+                for x in 0..nw {
+                    let fx = ((x as f32 + 0.5) * ix - 0.5).clamp(0.0, (w - 1) as f32);
+                    let x0 = fx as usize;
+                    let ax = fx - x0 as f32;
+                    let x1 = (x0 + 1).min(w - 1);
+                    let (a, b, c, d) = (y0 * w + x0, y0 * w + x1, y1 * w + x0, y1 * w + x1);
+                    let lerp = |p: &[f32]| {
+                        let top = p[a] + ax * (p[b] - p[a]);
+                        let bot = p[c] + ax * (p[d] - p[c]);
+                        top + ay * (bot - top)
+                    };
+                    ru[x] = lerp(&self.u.data) * sx;
+                    rv[x] = lerp(&self.v.data) * sy;
+                }
+            });
+        out
     }
 
     /// Flow vector at continuous coordinates (bilinear).
