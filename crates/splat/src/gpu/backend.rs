@@ -1,10 +1,10 @@
 //! [`GpuBackend`]: the wgpu implementation of [`TrainBackend`]. Parameters,
 //! Adam moments and densification statistics stay on the device across
 //! steps; a step reads back only the tile-intersection count (to size the
-//! key buffers), the loss partial sums and the visible count. With a D-SSIM
-//! weight > 0 the rendered image is read back and the loss gradient computed
-//! on the CPU with `train::loss::loss_and_grad` (no GPU SSIM kernel yet);
-//! with weight 0 the masked L1 gradient is computed on the GPU.
+//! key buffers), the loss partial sums and the visible count. The loss
+//! gradient is computed on the device: masked L1 (`loss.wgsl`) plus, with a
+//! D-SSIM weight > 0, masked D-SSIM (`ssim.wgsl`, checked against the CPU
+//! `train::loss::loss_and_grad`).
 
 use super::adam::{Adam, AdamArgs, AdamUniforms};
 use super::backward::{BackwardArgs, BackwardKernels, projected_grads_buffer, record_backward};
@@ -15,6 +15,7 @@ use super::loss::{Loss, LossArgs, LossUniforms, blocks};
 use super::mcmc::McmcKernels;
 use super::project::ParamBuffers;
 use super::project_backward::GradBuffers;
+use super::ssim::{Ssim, SsimArgs};
 use super::{GpuContext, GpuError, GpuOptions};
 use crate::backend::{MeansNoise, Regularization};
 use crate::backend::{StepInput, StepStats, TrainBackend, check_step_input};
@@ -54,6 +55,9 @@ pub struct GpuBackend {
     bwd: BackwardKernels,
     adam: Adam,
     loss: Loss,
+    ssim: Ssim,
+    /// Grow-only scratch of the D-SSIM kernel (2 × 15 planar maps).
+    ssim_scratch: Option<[wgpu::Buffer; 2]>,
     stats_k: DensifyStatsKernel,
     /// MCMC position noise and regulariser kernels.
     mcmc: McmcKernels,
@@ -84,6 +88,8 @@ impl GpuBackend {
             bwd: BackwardKernels::new(&ctx),
             adam: Adam::new(&ctx),
             loss: Loss::new(&ctx),
+            ssim: Ssim::new(&ctx),
+            ssim_scratch: None,
             stats_k: DensifyStatsKernel::new(&ctx),
             mcmc: McmcKernels::new(&ctx),
             reg: Regularization::default(),
@@ -192,47 +198,68 @@ impl TrainBackend for GpuBackend {
         let v_image = ctx.storage("v_image", pixels as u64 * 12);
         let lambda = input.loss.ssim_weight as f64;
         let mut rec = Recorder::new(ctx, self.profile);
-        let (mut l1, mut mse, mut ssim, mut loss) = (0.0f64, 0.0f64, 1.0f64, 0.0f64);
         let partials = ctx.storage("loss_partials", blocks(pixels) as u64 * 8);
-        if lambda > 0.0 {
-            // D-SSIM on the CPU from a readback (exactly the CPU backend's loss).
-            let t_read = std::time::Instant::now();
-            let image: Vec<f32> = ctx.read(&fs.image, pixels as usize * 3)?;
-            timings.push(("host:image_readback", t_read.elapsed().as_secs_f64() * 1e3));
-            let t_ssim = std::time::Instant::now();
-            let (lv, grad) = crate::train::loss::loss_and_grad(
-                &image,
-                input.target,
-                input.mask,
-                (cam.width as usize, cam.height as usize),
-                lambda,
-            );
-            ctx.queue
-                .write_buffer(&v_image, 0, bytemuck::cast_slice(&grad));
-            (l1, mse, ssim, loss) = (lv.l1, lv.mse, lv.ssim, lv.loss);
-            timings.push(("host:ssim_cpu+upload", t_ssim.elapsed().as_secs_f64() * 1e3));
+        let scale = if view.kept > 0.0 {
+            (1.0 - lambda) / (3.0 * view.kept)
         } else {
-            let scale = if view.kept > 0.0 {
-                (1.0 - lambda) / (3.0 * view.kept)
-            } else {
-                0.0
+            0.0
+        };
+        let norm = if view.kept > 0.0 {
+            1.0 / (3.0 * view.kept)
+        } else {
+            0.0
+        };
+        let mask_buf = view.mask.as_ref().unwrap_or(&view.target);
+        self.loss.dispatch(
+            ctx,
+            &mut rec,
+            &LossArgs {
+                image: &fs.image,
+                target: &view.target,
+                mask: mask_buf,
+                v_image: &v_image,
+                partials: &partials,
+                uniforms: LossUniforms {
+                    n_pixels: pixels,
+                    has_mask: view.mask.is_some() as u32,
+                    pad: [0; 2],
+                    scale: scale as f32,
+                    pad2: [0.0; 3],
+                },
+            },
+        )?;
+        let ssim_partials = ctx.storage("ssim_partials", blocks(pixels) as u64 * 4);
+        if lambda > 0.0 {
+            // D-SSIM on the device, added to the L1 gradient in v_image.
+            let need = super::ssim::SCRATCH_MAPS * pixels as u64 * 4;
+            if self
+                .ssim_scratch
+                .as_ref()
+                .is_none_or(|s| s[0].size() < need)
+            {
+                self.ssim_scratch = Some([
+                    ctx.storage("ssim_scratch0", need),
+                    ctx.storage("ssim_scratch1", need),
+                ]);
+            }
+            let Some([s0, s1]) = self.ssim_scratch.as_ref() else {
+                return Err(SplatError::Invalid("SSIM scratch missing".into()));
             };
-            self.loss.dispatch(
+            self.ssim.dispatch(
                 ctx,
                 &mut rec,
-                &LossArgs {
+                &SsimArgs {
                     image: &fs.image,
                     target: &view.target,
-                    mask: view.mask.as_ref().unwrap_or(&view.target),
+                    mask: mask_buf,
+                    has_mask: view.mask.is_some(),
                     v_image: &v_image,
-                    partials: &partials,
-                    uniforms: LossUniforms {
-                        n_pixels: pixels,
-                        has_mask: view.mask.is_some() as u32,
-                        pad: [0; 2],
-                        scale: scale as f32,
-                        pad2: [0.0; 3],
-                    },
+                    partials: &ssim_partials,
+                    scratch: [s0, s1],
+                    width: cam.width,
+                    height: cam.height,
+                    norm: norm as f32,
+                    lambda: lambda as f32,
                 },
             )?;
         }
@@ -364,20 +391,22 @@ impl TrainBackend for GpuBackend {
             t_sub.elapsed().as_secs_f64() * 1e3,
         ));
         let t_stats = std::time::Instant::now();
-        if lambda <= 0.0 {
-            let parts: Vec<f32> = ctx.read(&partials, blocks(pixels) as usize * 2)?;
-            let norm = if view.kept > 0.0 {
-                1.0 / (3.0 * view.kept)
-            } else {
-                0.0
-            };
-            let sums = parts.chunks_exact(2).fold((0.0f64, 0.0f64), |a, c| {
-                (a.0 + c[0] as f64, a.1 + c[1] as f64)
-            });
-            l1 = sums.0 * norm;
-            mse = sums.1 * norm;
-            loss = l1;
+        let parts: Vec<f32> = ctx.read(&partials, blocks(pixels) as usize * 2)?;
+        let sums = parts.chunks_exact(2).fold((0.0f64, 0.0f64), |a, c| {
+            (a.0 + c[0] as f64, a.1 + c[1] as f64)
+        });
+        let l1 = sums.0 * norm;
+        let mse = sums.1 * norm;
+        let mut ssim = 1.0f64;
+        if lambda > 0.0 {
+            let p: Vec<f32> = ctx.read(&ssim_partials, blocks(pixels) as usize)?;
+            ssim = p.iter().map(|&v| v as f64).sum();
         }
+        let loss = if view.kept > 0.0 {
+            (1.0 - lambda) * l1 + lambda * (1.0 - ssim)
+        } else {
+            0.0
+        };
         let visible: u32 = ctx.read::<u32>(&st.stats.visible, 1)?[0];
         timings.push(("host:stats_readback", t_stats.elapsed().as_secs_f64() * 1e3));
         self.timings = timings;

@@ -25,6 +25,7 @@ pub mod project_backward;
 pub mod radix_sort;
 pub mod rasterize;
 pub mod rasterize_backward;
+pub mod ssim;
 pub mod tile_ranges;
 
 #[cfg(test)]
@@ -66,6 +67,7 @@ pub static ALL_KERNELS: &[&kernel::KernelDecl] = &[
     &project_backward::DECL,
     &adam::DECL,
     &loss::DECL,
+    &ssim::DECL,
     &densify_stats::DECL,
     &mcmc::NOISE_DECL,
     &mcmc::REG_DECL,

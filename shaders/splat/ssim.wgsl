@@ -1,0 +1,184 @@
+// ssim.wgsl — masked D-SSIM term of the training loss on the GPU and its
+// gradient w.r.t. the rendered image (Kerbl et al. 2023 eq. 7; the same
+// formulation as the CPU `train::loss::loss_and_grad`): SSIM with the INRIA
+// 11×11 Gaussian window (σ = 1.5) and zero padding, computed as separable
+// horizontal + vertical 11-tap filters. The window filter is self-adjoint, so
+// the backward pass is: per-pixel dS/d(μx, E[x²], E[xy]) weighted by
+// g = mask / (3·kept), the same two filters again, and
+// dL/dx = −λ (f(dμx) + 2x f(dE[x²]) + y f(dE[xy])), added to `v_image`.
+// Maps are planar: map k of channel c at ((k·3 + c)·n + pixel).
+//
+// Entry points, in order: `products` (x, y, x², y², xy → dst), `blur_h`
+// (src → dst, `n_maps` maps), `blur_v` (src → dst), `ssim_terms` (stats in
+// src → weighted derivative maps in dst, partial sums of g·S), `blur_h`,
+// `blur_v`, `ssim_grad` (src → v_image).
+
+struct SsimUniforms {
+    width: u32,
+    height: u32,
+    // Maps × 3 channels processed by blur_h / blur_v.
+    n_maps: u32,
+    has_mask: u32,
+    // 1 / (3 · kept)
+    norm: f32,
+    // D-SSIM weight λ.
+    lambda: f32,
+    pad0: f32,
+    pad1: f32,
+    // Gaussian taps w[0..11] (offset −5..5), packed 4 per vector.
+    taps: array<vec4<f32>, 3>,
+}
+
+@group(0) @binding(0) var<uniform> u: SsimUniforms;
+@group(0) @binding(1) var<storage, read> image: array<f32>;
+@group(0) @binding(2) var<storage, read> target_rgb: array<f32>;
+@group(0) @binding(3) var<storage, read> mask: array<f32>;
+@group(0) @binding(4) var<storage, read> src: array<f32>;
+@group(0) @binding(5) var<storage, read_write> dst: array<f32>;
+@group(0) @binding(6) var<storage, read_write> v_image: array<f32>;
+@group(0) @binding(7) var<storage, read_write> partials: array<f32>;
+
+const C1: f32 = 0.0001;
+const C2: f32 = 0.0009;
+const RADIUS: i32 = 5;
+
+var<workgroup> s_sum: array<f32, 256>;
+
+fn tap(t: i32) -> f32 {
+    let k = u32(t + RADIUS);
+    return u.taps[k / 4u][k % 4u];
+}
+
+@compute @workgroup_size(256)
+fn products(@builtin(workgroup_id) wid: vec3<u32>, @builtin(num_workgroups) nwg: vec3<u32>,
+            @builtin(local_invocation_index) lid: u32) {
+    let n = u.width * u.height;
+    let q = linear_index(wid, nwg, lid, 256u);
+    if (q >= n) {
+        return;
+    }
+    for (var c = 0u; c < 3u; c++) {
+        let x = image[3u * q + c];
+        let y = target_rgb[3u * q + c];
+        dst[c * n + q] = x;
+        dst[(3u + c) * n + q] = y;
+        dst[(6u + c) * n + q] = x * x;
+        dst[(9u + c) * n + q] = y * y;
+        dst[(12u + c) * n + q] = x * y;
+    }
+}
+
+@compute @workgroup_size(256)
+fn blur_h(@builtin(workgroup_id) wid: vec3<u32>, @builtin(num_workgroups) nwg: vec3<u32>,
+          @builtin(local_invocation_index) lid: u32) {
+    let n = u.width * u.height;
+    let i = linear_index(wid, nwg, lid, 256u);
+    if (i >= n * u.n_maps) {
+        return;
+    }
+    let base = (i / n) * n;
+    let q = i % n;
+    let row = q / u.width;
+    let col = i32(q % u.width);
+    var acc = 0.0;
+    for (var t = -RADIUS; t <= RADIUS; t++) {
+        let cc = col + t;
+        if (cc >= 0 && cc < i32(u.width)) {
+            acc += tap(t) * src[base + row * u.width + u32(cc)];
+        }
+    }
+    dst[i] = acc;
+}
+
+@compute @workgroup_size(256)
+fn blur_v(@builtin(workgroup_id) wid: vec3<u32>, @builtin(num_workgroups) nwg: vec3<u32>,
+          @builtin(local_invocation_index) lid: u32) {
+    let n = u.width * u.height;
+    let i = linear_index(wid, nwg, lid, 256u);
+    if (i >= n * u.n_maps) {
+        return;
+    }
+    let base = (i / n) * n;
+    let q = i % n;
+    let row = i32(q / u.width);
+    let col = q % u.width;
+    var acc = 0.0;
+    for (var t = -RADIUS; t <= RADIUS; t++) {
+        let rr = row + t;
+        if (rr >= 0 && rr < i32(u.height)) {
+            acc += tap(t) * src[base + u32(rr) * u.width + col];
+        }
+    }
+    dst[i] = acc;
+}
+
+@compute @workgroup_size(256)
+fn ssim_terms(@builtin(workgroup_id) wid: vec3<u32>, @builtin(num_workgroups) nwg: vec3<u32>,
+              @builtin(local_invocation_index) lid: u32) {
+    let n = u.width * u.height;
+    let block = wid.y * nwg.x + wid.x;
+    let q = block * 256u + lid;
+    var total = 0.0;
+    if (q < n) {
+        var m = 1.0;
+        if (u.has_mask != 0u) {
+            m = mask[q];
+        }
+        let g = m * u.norm;
+        for (var c = 0u; c < 3u; c++) {
+            var d_mx = 0.0;
+            var d_exx = 0.0;
+            var d_exy = 0.0;
+            if (g != 0.0) {
+                let mx = src[c * n + q];
+                let my = src[(3u + c) * n + q];
+                let exx = src[(6u + c) * n + q];
+                let eyy = src[(9u + c) * n + q];
+                let exy = src[(12u + c) * n + q];
+                let a1 = 2.0 * mx * my + C1;
+                let a2 = 2.0 * (exy - mx * my) + C2;
+                let b1 = mx * mx + my * my + C1;
+                let b2 = (exx - mx * mx) + (eyy - my * my) + C2;
+                let s = a1 * a2 / (b1 * b2);
+                total += g * s;
+                let ds_dexx = -s / b2;
+                let ds_dexy = 2.0 * a1 / (b1 * b2);
+                let ds_dmx = 2.0 * my * a2 / (b1 * b2) - 2.0 * mx * s / b1 - 2.0 * mx * ds_dexx
+                    - my * ds_dexy;
+                d_mx = g * ds_dmx;
+                d_exx = g * ds_dexx;
+                d_exy = g * ds_dexy;
+            }
+            dst[c * n + q] = d_mx;
+            dst[(3u + c) * n + q] = d_exx;
+            dst[(6u + c) * n + q] = d_exy;
+        }
+    }
+    s_sum[lid] = total;
+    workgroupBarrier();
+    for (var off = 128u; off > 0u; off = off / 2u) {
+        if (lid < off) {
+            s_sum[lid] += s_sum[lid + off];
+        }
+        workgroupBarrier();
+    }
+    if (lid == 0u) {
+        partials[block] = s_sum[0];
+    }
+}
+
+@compute @workgroup_size(256)
+fn ssim_grad(@builtin(workgroup_id) wid: vec3<u32>, @builtin(num_workgroups) nwg: vec3<u32>,
+             @builtin(local_invocation_index) lid: u32) {
+    let n = u.width * u.height;
+    let q = linear_index(wid, nwg, lid, 256u);
+    if (q >= n) {
+        return;
+    }
+    for (var c = 0u; c < 3u; c++) {
+        let x = image[3u * q + c];
+        let y = target_rgb[3u * q + c];
+        let d = src[c * n + q] + 2.0 * x * src[(3u + c) * n + q] + y * src[(6u + c) * n + q];
+        v_image[3u * q + c] += -u.lambda * d;
+    }
+}
