@@ -46,9 +46,29 @@ pub fn lpips_render(render: &[f32], view: &View) -> Vec<f32> {
     }
 }
 
+/// The LPIPS network, loaded before rendering so a missing runtime or a bad
+/// model fails fast.
 #[cfg(feature = "onnx")]
-fn lpips_scores(model: &Path, views: &[View], images: &[Vec<f32>]) -> anyhow::Result<Vec<f64>> {
-    let mut net = splat::lpips::Lpips::load(model)?;
+type Net = splat::lpips::Lpips;
+#[cfg(not(feature = "onnx"))]
+type Net = std::convert::Infallible;
+
+#[cfg(feature = "onnx")]
+fn load_lpips(model: &Path) -> anyhow::Result<Net> {
+    Ok(splat::lpips::Lpips::load(model)?)
+}
+
+#[cfg(not(feature = "onnx"))]
+fn load_lpips(model: &Path) -> anyhow::Result<Net> {
+    anyhow::bail!(
+        "--lpips {}: this romosplat was built without ONNX Runtime support; rebuild with \
+         `cargo build --release -p romosplat --features onnx` and set ORT_DYLIB_PATH to libonnxruntime.so",
+        model.display()
+    )
+}
+
+#[cfg(feature = "onnx")]
+fn lpips_scores(net: &mut Net, views: &[View], images: &[Vec<f32>]) -> anyhow::Result<Vec<f64>> {
     let mut out = Vec::with_capacity(views.len());
     for (v, img) in views.iter().zip(images) {
         let r = lpips_render(img, v);
@@ -58,22 +78,12 @@ fn lpips_scores(model: &Path, views: &[View], images: &[Vec<f32>]) -> anyhow::Re
 }
 
 #[cfg(not(feature = "onnx"))]
-fn lpips_scores(model: &Path, _: &[View], _: &[Vec<f32>]) -> anyhow::Result<Vec<f64>> {
-    anyhow::bail!(
-        "--lpips {}: this romosplat was built without ONNX Runtime support; rebuild with \
-         `cargo build --release -p romosplat --features onnx` and set ORT_DYLIB_PATH to libonnxruntime.so",
-        model.display()
-    )
+fn lpips_scores(net: &mut Net, _: &[View], _: &[Vec<f32>]) -> anyhow::Result<Vec<f64>> {
+    match *net {}
 }
 
 pub fn run(args: &Args, ctx: &Ctx) -> anyhow::Result<serde_json::Value> {
-    if let Some(m) = &args.lpips {
-        // Fail before rendering: no feature, no runtime or a bad model.
-        if !cfg!(feature = "onnx") || !m.is_file() {
-            lpips_scores(m, &[], &[])?;
-            anyhow::bail!("{}: LPIPS model file not found", m.display());
-        }
-    }
+    let mut net = args.lpips.as_deref().map(load_lpips).transpose()?;
     let (splats, scene, idx) = args.views.load()?;
     let mut views = load_views(&scene, &idx, false)?;
     let mut masked = 0;
@@ -96,8 +106,8 @@ pub fn run(args: &Args, ctx: &Ctx) -> anyhow::Result<serde_json::Value> {
         ..Default::default()
     };
     let (rep, images) = evaluate(backend.as_mut(), &splats, &views, &opts)?;
-    let lpips = match &args.lpips {
-        Some(m) => Some(lpips_scores(m, &views, &images)?),
+    let lpips = match &mut net {
+        Some(n) => Some(lpips_scores(n, &views, &images)?),
         None => None,
     };
     for (i, v) in rep.views.iter().enumerate() {
@@ -164,5 +174,16 @@ mod tests {
         assert_eq!(lpips_render(&r, &view), vec![0.9, 0.8, 0.7, 0.4, 0.5, 0.6]);
         let unmasked = View { mask: None, ..view };
         assert_eq!(lpips_render(&r, &unmasked), r.to_vec());
+    }
+
+    #[cfg(not(feature = "onnx"))]
+    #[test]
+    fn lpips_without_feature_says_how_to_build() {
+        let e = load_lpips(Path::new("net.onnx")).unwrap_err().to_string();
+        assert!(
+            e.contains("net.onnx") && e.contains("--features onnx"),
+            "{e}"
+        );
+        assert!(!e.contains('\n'));
     }
 }
