@@ -44,6 +44,14 @@ pub struct MlpOptions {
     /// sample (κ(0.5) = 0.96) and training collapses to "all static" even
     /// with the balanced loss (see the toy test).
     pub tau_sq_start: f64,
+    /// Weight of the U (moving) hinge term relative to the L (static) one,
+    /// each averaged over its own labelled pixels (ours; 1.0 = balanced;
+    /// default 0.35). With a saturating kernel the net "gives up" the
+    /// labelled pixels it cannot fit, and at 1.0 it gives up whole L regions
+    /// (sky, crowd) rather than U pixels: precision 0.39 at recall 0.84.
+    /// DAVIS (8 × 40 frames, l_factor 0.3, mean J): 1.0 → 0.374,
+    /// 0.7 → 0.412, 0.5 → 0.465, 0.35 → 0.486, 0.2 → 0.326.
+    pub moving_weight: f64,
     /// Weight λ of the Lipschitz penalty ∏ softplus(c_i) (ours: 1e-3).
     pub lipschitz_weight: f64,
     /// Samples per mini-batch (ours: 4096).
@@ -62,6 +70,7 @@ impl Default for MlpOptions {
             epochs_per_round: 25,
             tau_sq: 0.01,
             tau_sq_start: 1.0,
+            moving_weight: 0.35,
             lipschitz_weight: 1e-3,
             batch_size: 4096,
             samples_per_frame: 2048,
@@ -73,11 +82,15 @@ impl Default for MlpOptions {
 impl MlpOptions {
     /// Check the options.
     pub fn validate(&self) -> crate::Result<()> {
-        if !(self.lr > 0.0 && self.tau_sq > 0.0 && self.lipschitz_weight >= 0.0)
+        if !(self.lr > 0.0
+            && self.tau_sq > 0.0
+            && self.lipschitz_weight >= 0.0
+            && self.moving_weight > 0.0)
             || self.batch_size == 0
         {
             return Err(crate::RomoError::Options(
-                "mlp: lr > 0, tau_sq > 0, lipschitz_weight >= 0, batch_size > 0 required".into(),
+                "mlp: lr > 0, tau_sq > 0, lipschitz_weight >= 0, moving_weight > 0, batch_size > 0 required"
+                    .into(),
             ));
         }
         Ok(())
@@ -249,7 +262,8 @@ impl Mlp {
             .iter()
             .filter(|l| **l == Label::Moving)
             .count()
-            .max(1) as f64;
+            .max(1) as f64
+            / o.moving_weight;
         let nl = labels
             .iter()
             .filter(|l| **l == Label::Static)

@@ -186,6 +186,10 @@ pub struct RomoReport {
 pub struct Segmentation {
     /// Moving probability per frame on the grid.
     pub probs: Vec<Plane>,
+    /// Last round's U (likely moving) labels per frame on the grid.
+    pub u: Vec<Vec<bool>>,
+    /// Last round's L (likely static) labels per frame on the grid.
+    pub l: Vec<Vec<bool>>,
     /// Diagnostics.
     pub report: RomoReport,
 }
@@ -462,10 +466,27 @@ pub fn segment_frames(
             data: d,
         })
         .collect();
+    let mut planes = planes;
+    if o.refine.static_veto_factor > 0.0
+        && let Some((labels, _)) = &last
+    {
+        for (p, l) in planes.iter_mut().zip(labels) {
+            let thr = o.refine.static_veto_factor * l.v;
+            for (v, s) in p.data.iter_mut().zip(&l.s) {
+                if *s < thr {
+                    *v = 0.0;
+                }
+            }
+        }
+    }
     let planes = tm.time("refine", || {
         temporal_smooth(&planes, o.refine.temporal_weight)
     });
+    let mut u_all = Vec::new();
+    let mut l_all = Vec::new();
     if let Some((labels, fits)) = last {
+        u_all = labels.iter().map(|l| l.u.clone()).collect();
+        l_all = labels.iter().map(|l| l.l.clone()).collect();
         for (t, l) in labels.iter().enumerate() {
             let dropped = l.inlier_ratio < o.labels.min_inlier_ratio;
             if dropped {
@@ -496,6 +517,8 @@ pub fn segment_frames(
     }
     Ok(Segmentation {
         probs: planes,
+        u: u_all,
+        l: l_all,
         report,
     })
 }

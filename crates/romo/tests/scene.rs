@@ -1,5 +1,5 @@
 //! Scene-level check: RoMo on the built-in small synthetic scene (generated
-//! into a temp folder, fewer frames to stay fast in the dev profile) must
+//! into a temp folder, 24 of its frames to stay fast in the dev profile) must
 //! find the pedestrians: J against `gt_motion/` above a threshold set from
 //! measurement, masks in the COLMAP convention, and all-keep masks for the
 //! held-out test views.
@@ -11,18 +11,26 @@ use std::path::Path;
 fn small_scene_masks_match_ground_truth_motion() {
     let spec_path = Path::new(env!("CARGO_MANIFEST_DIR")).join("../../scenes/small.toml");
     let mut spec = loader::synth::load_spec(&spec_path).unwrap();
-    spec.frames = 16;
+    spec.frames = 24;
     spec.supersample = 1;
     let dir = tempfile::tempdir().unwrap();
     loader::synth::generate(&spec, dir.path()).unwrap();
     let scene = loader::scene::Scene::load(dir.path(), &Default::default()).unwrap();
     let mut opts = romo::RomoOptions::default();
     opts.labels.robust.iterations = 200;
-    opts.grid_max_side = 192;
     let out = dir.path().join("out");
     opts.out = Some(out.clone());
     let report = romo::segment_scene(&scene, &opts, &|_, _, _| {}).unwrap();
-    assert_eq!(report.frames.len(), 16);
+    assert_eq!(report.frames.len(), 24);
+    let u: f32 = report.frames.iter().map(|f| f.u_coverage).sum::<f32>() / 24.0;
+    eprintln!(
+        "U coverage {u:.4}, moving samples {:?}",
+        report
+            .rounds
+            .iter()
+            .map(|r| r.samples_moving)
+            .collect::<Vec<_>>()
+    );
     assert!(
         report.rounds.iter().all(|r| !r.collapsed),
         "{:?}",
@@ -36,13 +44,15 @@ fn small_scene_masks_match_ground_truth_motion() {
         "small scene: J {:.3} P {:.3} R {:.3}",
         m.j_mean, m.precision, m.recall
     );
-    // Measured 2026-11-22 (dev profile, 16 frames + 4 held-out views): J
-    // 0.283, precision 0.77, recall 0.12. The pedestrians cross sideways
-    // while the camera dollies sideways, so most of their motion lies along
-    // epipolar lines and the Sampson residual cannot see it.
-    assert!(m.precision >= 0.5, "precision {}", m.precision);
+    // Measured 2026-11-22 (dev profile, 24 frames + 4 held-out views,
+    // default options): J 0.413, precision 0.82, recall 0.33 (U covers
+    // only ~0.1% of the grid: the pedestrians cross sideways while the
+    // camera dollies sideways, so most of their motion lies along epipolar
+    // lines where the Sampson residual cannot see it). Thresholds a bit
+    // below the measurement.
+    assert!(m.precision >= 0.6, "precision {}", m.precision);
     assert!(
-        m.j_mean >= 0.2,
+        m.j_mean >= 0.35,
         "J {} (precision {}, recall {})",
         m.j_mean,
         m.precision,

@@ -1,7 +1,9 @@
-//! `romosplat bench mask [--scene DIR | --frames N]`: speed of the whole
-//! mask stage with the built-in backends; prints per-stage medians (ms) and
-//! frames per second as JSON. Without `--scene` it generates a synthetic
-//! 854×480 textured sequence with a moving block in a temp folder.
+//! `romosplat bench mask [--scene DIR | --images DIR | --frames N]`: speed
+//! of the whole mask stage with the built-in backends; prints per-stage
+//! medians (ms, total and per frame) and frames per second as JSON. `--images`
+//! takes a folder of frames (e.g. a DAVIS sequence,
+//! `JPEGImages/480p/car-roundabout`); without either it generates a
+//! synthetic 854×480 textured sequence with a moving block in a temp folder.
 
 use crate::Ctx;
 use anyhow::Context;
@@ -13,6 +15,16 @@ pub struct Args {
     /// Scene folder to time (default: generated 854×480 frames).
     #[arg(long)]
     pub scene: Option<PathBuf>,
+    /// Folder of video frames (jpg/png, sorted by name), e.g. a DAVIS
+    /// sequence; `--max-frames` limits how many are used.
+    #[arg(long, conflicts_with = "scene")]
+    pub images: Option<PathBuf>,
+    /// Use at most this many frames of `--images`.
+    #[arg(long)]
+    pub max_frames: Option<usize>,
+    /// Options as a (partial) RomoOptions JSON, e.g. '{"grid_max_side": 192}'.
+    #[arg(long)]
+    pub options: Option<String>,
     /// Frames to generate when no scene is given.
     #[arg(long, default_value_t = 30)]
     pub frames: usize,
@@ -48,8 +60,61 @@ fn synthetic(dir: &std::path::Path, n: usize) -> anyhow::Result<()> {
     Ok(())
 }
 
+fn image_files(dir: &std::path::Path, max: Option<usize>) -> anyhow::Result<Vec<PathBuf>> {
+    let mut v: Vec<PathBuf> = std::fs::read_dir(dir)
+        .with_context(|| format!("{}: cannot list frames", dir.display()))?
+        .filter_map(|e| e.ok().map(|e| e.path()))
+        .filter(|p| {
+            p.extension()
+                .and_then(|e| e.to_str())
+                .is_some_and(|e| matches!(e.to_ascii_lowercase().as_str(), "jpg" | "jpeg" | "png"))
+        })
+        .collect();
+    v.sort();
+    if let Some(m) = max {
+        v.truncate(m);
+    }
+    if v.len() < 2 {
+        anyhow::bail!("{}: need at least 2 image frames", dir.display());
+    }
+    Ok(v)
+}
+
 /// Run `romosplat bench mask`.
 pub fn run(args: &Args, ctx: &Ctx) -> anyhow::Result<serde_json::Value> {
+    let out = std::env::temp_dir().join(format!("romosplat-bench-mask-out-{}", std::process::id()));
+    let mut opts: romo::RomoOptions = match &args.options {
+        Some(js) => serde_json::from_str(js).context("--options: not a RomoOptions JSON")?,
+        None => Default::default(),
+    };
+    opts.out = Some(out.clone());
+    if let Some(dir) = &args.images {
+        let paths = image_files(dir, args.max_frames)?;
+        let names: Vec<String> = paths
+            .iter()
+            .map(|p| {
+                p.file_name()
+                    .map(|n| n.to_string_lossy().into_owned())
+                    .unwrap_or_default()
+            })
+            .collect();
+        let first = loader::io::read_rgb8(&paths[0])?;
+        let (w, h) = (first.width(), first.height());
+        let res = time_reps(args, ctx, paths.len(), (w, h), &opts, || {
+            Ok(romo::segment_paths(
+                &paths,
+                &names,
+                &out,
+                &opts,
+                &|_, _, _| {},
+            )?)
+        });
+        let _ = std::fs::remove_dir_all(&out);
+        return res.map(|mut v| {
+            v["source"] = serde_json::json!(dir.display().to_string());
+            v
+        });
+    }
     let tmp;
     let root = match &args.scene {
         Some(s) => s.clone(),
@@ -61,17 +126,35 @@ pub fn run(args: &Args, ctx: &Ctx) -> anyhow::Result<serde_json::Value> {
     };
     let scene = loader::scene::Scene::load(&root, &loader::scene::SceneOptions::default())
         .with_context(|| format!("loading {}", root.display()))?;
-    let out = std::env::temp_dir().join(format!("romosplat-bench-mask-out-{}", std::process::id()));
-    let opts = romo::RomoOptions {
-        out: Some(out.clone()),
-        ..Default::default()
-    };
     let n = scene.frames.len();
+    let size = scene.full_size(0).unwrap_or((0, 0));
+    let res = time_reps(args, ctx, n, size, &opts, || {
+        Ok(romo::segment_scene(&scene, &opts, &|_, _, _| {})?)
+    });
+    let _ = std::fs::remove_dir_all(&out);
+    if args.scene.is_none() {
+        let _ = std::fs::remove_dir_all(&root);
+    }
+    res.map(|mut v| {
+        v["source"] = serde_json::json!(root.display().to_string());
+        v
+    })
+}
+
+/// Run `f` `reps` times; per-stage and total medians as JSON.
+fn time_reps(
+    args: &Args,
+    ctx: &Ctx,
+    n: usize,
+    (w, h): (u32, u32),
+    opts: &romo::RomoOptions,
+    f: impl Fn() -> anyhow::Result<romo::RomoReport>,
+) -> anyhow::Result<serde_json::Value> {
     let mut per_stage: std::collections::BTreeMap<String, Vec<f64>> = Default::default();
     let mut totals = Vec::new();
     for r in 0..args.reps.max(1) {
         let t = std::time::Instant::now();
-        let rep = romo::segment_scene(&scene, &opts, &|_, _, _| {})?;
+        let rep = f()?;
         let total = t.elapsed().as_secs_f64() * 1e3;
         ctx.info(format!(
             "rep {}: {:.0} ms, {:.2} frames/s",
@@ -98,13 +181,16 @@ pub fn run(args: &Args, ctx: &Ctx) -> anyhow::Result<serde_json::Value> {
             )
         })
         .collect();
-    let (w, h) = scene.full_size(0).unwrap_or((0, 0));
-    let _ = std::fs::remove_dir_all(&out);
-    if args.scene.is_none() {
-        let _ = std::fs::remove_dir_all(&root);
-    }
+    let load = std::fs::read_to_string("/proc/loadavg").ok().and_then(|s| {
+        s.split_whitespace()
+            .next()
+            .and_then(|v| v.parse::<f64>().ok())
+    });
     Ok(serde_json::json!({
         "frames": n, "width": w, "height": h, "threads": rayon::current_num_threads(),
-        "total_ms_median": total, "frames_per_second": n as f64 / total * 1e3, "stages": stages,
+        "reps": args.reps.max(1), "load_average_1min": load,
+        "grid_max_side": opts.grid_max_side, "flow_scale": opts.flow_scale,
+        "total_ms_median": total, "ms_per_frame_median": total / n as f64,
+        "frames_per_second": n as f64 / total * 1e3, "stages": stages,
     }))
 }

@@ -1,0 +1,211 @@
+//! Measurement (not a test): per-stage diagnosis of RoMo on DAVIS-2016.
+//! For each sequence: how much of U lies inside the ground-truth object
+//! (U precision) and how much of the object it covers (U recall), how much
+//! of L lies inside the object (L error), the MLP output on the grid
+//! (J / precision / recall at the threshold) and after refinement to full
+//! resolution. Env as in the `davis` example (`DAVIS_DIR`, `ROMO_OPTS`,
+//! `SEQS`), plus `MAXF` (first N frames only).
+#![allow(clippy::unwrap_used, clippy::expect_used)]
+use romo::plane::{Plane, Rgb};
+use std::path::PathBuf;
+
+#[derive(Default, Clone, Copy)]
+struct Counts {
+    tp: f64,
+    fp: f64,
+    fn_: f64,
+    j: f64,
+    n: f64,
+}
+impl Counts {
+    fn add(&mut self, pred: &[bool], gt: &[bool]) {
+        let (mut tp, mut fp, mut fn_) = (0.0, 0.0, 0.0);
+        for (p, g) in pred.iter().zip(gt) {
+            match (*p, *g) {
+                (true, true) => tp += 1.0,
+                (true, false) => fp += 1.0,
+                (false, true) => fn_ += 1.0,
+                _ => {}
+            }
+        }
+        self.tp += tp;
+        self.fp += fp;
+        self.fn_ += fn_;
+        let u = tp + fp + fn_;
+        self.j += if u == 0.0 { 1.0 } else { tp / u };
+        self.n += 1.0;
+    }
+    fn p(&self) -> f64 {
+        self.tp / (self.tp + self.fp).max(1.0)
+    }
+    fn r(&self) -> f64 {
+        self.tp / (self.tp + self.fn_).max(1.0)
+    }
+    fn jm(&self) -> f64 {
+        self.j / self.n.max(1.0)
+    }
+}
+
+fn main() {
+    let davis =
+        PathBuf::from(std::env::var("DAVIS_DIR").unwrap_or("/work/shared/data/davis2016".into()));
+    let opts: romo::RomoOptions =
+        serde_json::from_str(&std::env::var("ROMO_OPTS").unwrap_or("{}".into())).unwrap();
+    let only: Option<Vec<String>> = std::env::var("SEQS")
+        .ok()
+        .map(|s| s.split(',').map(String::from).collect());
+    let maxf: usize = std::env::var("MAXF")
+        .ok()
+        .and_then(|s| s.parse().ok())
+        .unwrap_or(usize::MAX);
+    let imgs = davis.join("JPEGImages/480p");
+    let mut seqs: Vec<_> = std::fs::read_dir(&imgs)
+        .unwrap()
+        .map(|e| e.unwrap().file_name().into_string().unwrap())
+        .collect();
+    seqs.sort();
+    let mut sums = [0.0f64; 4];
+    let mut k = 0.0;
+    for s in seqs {
+        if only.as_ref().is_some_and(|o| !o.contains(&s)) {
+            continue;
+        }
+        let mut paths: Vec<PathBuf> = std::fs::read_dir(imgs.join(&s))
+            .unwrap()
+            .map(|e| e.unwrap().path())
+            .collect();
+        paths.sort();
+        paths.truncate(maxf);
+        let src = romo::scene::PathSource {
+            paths: paths.clone(),
+        };
+        let fx = romo::scene::make_extractor(&opts).unwrap();
+        let flow = romo::flow::dis::Dis::new(opts.flow.clone());
+        let t = std::time::Instant::now();
+        let seg = romo::segment_frames(&src, &opts, &flow, fx.as_ref(), &|_, _, _| {}).unwrap();
+        let secs = t.elapsed().as_secs_f64();
+        let (gw, gh) = seg.report.grid;
+        let (mut uc, mut lc, mut gc, mut fc) = (
+            Counts::default(),
+            Counts::default(),
+            Counts::default(),
+            Counts::default(),
+        );
+        let mut gt_frac = 0.0;
+        let thrs = [0.3f32, 0.7, 0.9];
+        let mut tc = [Counts::default(); 3];
+        let mut vc = Counts::default();
+        for (i, p) in paths.iter().enumerate() {
+            let name = p.file_stem().unwrap().to_string_lossy().into_owned();
+            let gpath = davis
+                .join("Annotations/480p")
+                .join(&s)
+                .join(format!("{name}.png"));
+            let g = loader::io::read_gray8(&gpath).unwrap();
+            let (w, h) = (g.width() as usize, g.height() as usize);
+            let gtp = Plane {
+                w,
+                h,
+                data: g.as_raw().iter().map(|v| (*v > 127) as u8 as f32).collect(),
+            };
+            let gt_full: Vec<bool> = gtp.data.iter().map(|v| *v > 0.5).collect();
+            let gt_grid: Vec<bool> = gtp.resize(gw, gh).data.iter().map(|v| *v > 0.5).collect();
+            gt_frac += gt_grid.iter().filter(|b| **b).count() as f64 / gt_grid.len() as f64;
+            uc.add(&seg.u[i], &gt_grid);
+            lc.add(&seg.l[i], &gt_grid.iter().map(|b| !b).collect::<Vec<_>>());
+            let thr = opts.refine.threshold;
+            gc.add(
+                &seg.probs[i]
+                    .data
+                    .iter()
+                    .map(|v| *v > thr)
+                    .collect::<Vec<_>>(),
+                &gt_grid,
+            );
+            vc.add(
+                &seg.probs[i]
+                    .data
+                    .iter()
+                    .zip(&seg.l[i])
+                    .map(|(v, l)| *v > thr && !l)
+                    .collect::<Vec<_>>(),
+                &gt_grid,
+            );
+            for (c, t) in tc.iter_mut().zip(thrs) {
+                c.add(
+                    &seg.probs[i].data.iter().map(|v| *v > t).collect::<Vec<_>>(),
+                    &gt_grid,
+                );
+            }
+            let frame = Rgb::from_image(&loader::io::read_rgb32f(p).unwrap());
+            if let Ok(d) = std::env::var("DUMP")
+                && i % 10 == 0
+            {
+                // frame | U (red) / L (green) | probability | ground truth
+                let small = frame.resize(gw, gh);
+                let img = image::RgbImage::from_fn(4 * gw as u32, gh as u32, |x, y| {
+                    let (k, x) = (x as usize / gw, x as usize % gw);
+                    let j = y as usize * gw + x;
+                    let b = |v: f32| (v.clamp(0.0, 1.0) * 255.0) as u8;
+                    match k {
+                        0 => image::Rgb([
+                            b(small.c[0].data[j]),
+                            b(small.c[1].data[j]),
+                            b(small.c[2].data[j]),
+                        ]),
+                        1 => image::Rgb([255 * seg.u[i][j] as u8, 255 * seg.l[i][j] as u8, 0]),
+                        2 => image::Rgb([b(seg.probs[i].data[j]); 3]),
+                        _ => image::Rgb([255 * gt_grid[j] as u8; 3]),
+                    }
+                });
+                let _ = std::fs::create_dir_all(&d);
+                img.save(format!("{d}/{s}_{i:03}.png")).unwrap();
+            }
+            let full =
+                romo::refine::upsample_probability(&seg.probs[i], &frame.gray(), &opts.refine);
+            fc.add(
+                &full.data.iter().map(|v| *v > thr).collect::<Vec<_>>(),
+                &gt_full,
+            );
+        }
+        let n = paths.len() as f64;
+        let nh = seg.report.pairs.iter().filter(|p| p.model == "H").count();
+        eprintln!(
+            "{s:15} gt {:.3} | U prec {:.2} rec {:.2} cov {:.3} | L prec(static) {:.3} rec {:.2} | grid J {:.3} P {:.2} R {:.2} | full J {:.3} P {:.2} R {:.2} | H {nh}/{} | {:.1} fps | J@.3/.7/.9 {:.3} {:.3} {:.3} | train rec mov/stat {:.2}/{:.2} | veto J {:.3} P {:.2} R {:.2}",
+            gt_frac / n,
+            uc.p(),
+            uc.r(),
+            (uc.tp + uc.fp) / (n * (gw * gh) as f64),
+            lc.p(),
+            lc.r(),
+            gc.jm(),
+            gc.p(),
+            gc.r(),
+            fc.jm(),
+            fc.p(),
+            fc.r(),
+            seg.report.pairs.len(),
+            n / secs,
+            tc[0].jm(),
+            tc[1].jm(),
+            tc[2].jm(),
+            seg.report.rounds.last().map_or(0.0, |r| r.recall_moving),
+            seg.report.rounds.last().map_or(0.0, |r| r.recall_static),
+            vc.jm(),
+            vc.p(),
+            vc.r(),
+        );
+        sums[0] += gc.jm();
+        sums[1] += fc.jm();
+        sums[2] += fc.p();
+        sums[3] += fc.r();
+        k += 1.0;
+    }
+    eprintln!(
+        "MEAN grid J {:.3} | full J {:.3} P {:.3} R {:.3}",
+        sums[0] / k,
+        sums[1] / k,
+        sums[2] / k,
+        sums[3] / k
+    );
+}
