@@ -14,6 +14,8 @@ use bytemuck::{Pod, Zeroable};
 
 /// Invocations per workgroup (pixels per partial sum in `ssim_terms`).
 pub const WORKGROUP_SIZE: u32 = 256;
+/// Outputs per invocation of `blur_h` / `blur_v` (`SEG` in the shader).
+pub const BLUR_SEGMENT: u32 = 8;
 /// Planar maps per scratch buffer (5 statistics × 3 channels).
 pub const SCRATCH_MAPS: u64 = 15;
 
@@ -180,7 +182,12 @@ impl Ssim {
                     ("partials", a.partials),
                 ],
             )?;
-            let items = if maps > 0 { n * maps } else { n };
+            let seg = |len: u32| len.div_ceil(BLUR_SEGMENT);
+            let items = match entry {
+                "blur_h" => maps * a.height * seg(a.width),
+                "blur_v" => maps * a.width * seg(a.height),
+                _ => n,
+            };
             rec.dispatch(&self.kernel, entry, &bind, groups_1d(items, WORKGROUP_SIZE))?;
         }
         Ok(())
