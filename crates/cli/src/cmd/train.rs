@@ -100,6 +100,24 @@ pub struct Args {
     /// Densification strategy.
     #[arg(long, value_enum, default_value_t = StrategyArg::Default)]
     pub strategy: StrategyArg,
+    /// Default strategy: first step that densifies (INRIA 500).
+    #[arg(long, default_value_t = splat::strategy::DefaultStrategyOptions::default().densify_from)]
+    pub densify_from: u32,
+    /// Default strategy: last step that densifies (INRIA 15000).
+    #[arg(long, default_value_t = splat::strategy::DefaultStrategyOptions::default().densify_until)]
+    pub densify_until: u32,
+    /// Default strategy: densify every N steps (INRIA 100).
+    #[arg(long, default_value_t = splat::strategy::DefaultStrategyOptions::default().densify_every)]
+    pub densify_every: u32,
+    /// Default strategy: view-space positional gradient threshold (INRIA 2e-4).
+    #[arg(long, default_value_t = splat::strategy::DefaultStrategyOptions::default().grad_threshold)]
+    pub grad_threshold: f32,
+    /// Default strategy: reset opacities every N steps (INRIA 3000; 0 = never).
+    #[arg(long, default_value_t = splat::strategy::DefaultStrategyOptions::default().opacity_reset_every)]
+    pub opacity_reset_every: u32,
+    /// Raise the active SH degree by one every N steps (INRIA 1000).
+    #[arg(long, default_value_t = TrainOptions::default().sh_degree_every)]
+    pub sh_degree_every: u32,
     /// Initialisation source.
     #[arg(long, value_enum, default_value_t = InitKind::Auto)]
     pub init: InitKind,
@@ -205,8 +223,14 @@ pub fn run(args: &Args, ctx: &Ctx) -> anyhow::Result<serde_json::Value> {
             InitKind::Points => InitMode::Points,
             InitKind::Random => InitMode::Random,
         },
+        sh_degree_every: args.sh_degree_every,
         strategy: splat::strategy::DefaultStrategyOptions {
             max_splats: args.max_splats,
+            densify_from: args.densify_from,
+            densify_until: args.densify_until,
+            densify_every: args.densify_every,
+            grad_threshold: args.grad_threshold,
+            opacity_reset_every: args.opacity_reset_every,
             ..Default::default()
         },
         strategy_kind: match args.strategy {
