@@ -60,8 +60,12 @@ fn main() {
         .unwrap_or(3);
     // DIS_OPTS: a partial DisOptions JSON (experiments); PAIRS: a
     // comma-separated list of name prefixes to run.
+    // PRESET=large selects DisOptions::large_motion().
     let opts: romo::flow::dis::DisOptions = match std::env::var("DIS_OPTS") {
         Ok(s) => serde_json::from_str(&s).unwrap(),
+        Err(_) if std::env::var("PRESET").as_deref() == Ok("large") => {
+            romo::flow::dis::DisOptions::large_motion()
+        }
         Err(_) => Default::default(),
     };
     let filter: Vec<String> = std::env::var("PAIRS")

@@ -60,6 +60,13 @@ pub struct DisOptions {
     pub coarse_search_radius: usize,
     /// Number of coarsest levels that run the exhaustive search (default 1).
     pub search_levels: usize,
+    /// Fraction of the Gauss–Newton step taken per descent iteration
+    /// (default 1.0). OpenCV's implementation effectively takes 1/8 (its
+    /// unnormalised Sobel gradients scale the Hessian by 64 and the
+    /// right-hand side by 8); [`DisOptions::large_motion`] uses 0.125, which
+    /// keeps patches from jumping to spurious matches under large motion
+    /// and blur, at some cost in sub-pixel accuracy on small motion.
+    pub descent_step: f32,
     /// Variational refinement (α = 20, δ = 5, γ = 10, 5 iterations).
     pub variational: VariationalOptions,
 }
@@ -74,12 +81,28 @@ impl Default for DisOptions {
             coarsest_width: 32,
             coarse_search_radius: 0,
             search_levels: 1,
+            descent_step: 1.0,
             variational: VariationalOptions::default(),
         }
     }
 }
 
 impl DisOptions {
+    /// Preset for large motion (Sintel ambush/market, 30–70 px): the
+    /// defaults with damped descent steps (`descent_step` 0.125). Measured
+    /// mean EPE on the five large-motion pairs 39.9 px vs 46.4 px for the
+    /// default; on small motion it is worse (non-occluded EPE 0.57 vs 0.54).
+    /// It is conservative, not general: the damped coarsest level cannot
+    /// travel far, so a clean 40 px translation of a synthetic texture is
+    /// missed (EPE 49 px, where the default gets 0.12). Not used by the
+    /// mask stage.
+    pub fn large_motion() -> Self {
+        Self {
+            descent_step: 0.125,
+            ..Self::default()
+        }
+    }
+
     /// Check the options are usable.
     pub fn validate(&self) -> crate::Result<()> {
         if !PATCH_SIZES.contains(&self.patch_size)
@@ -89,6 +112,12 @@ impl DisOptions {
             return Err(crate::RomoError::Options(format!(
                 "DIS: need patch_size in {:?} and 0 < patch_stride <= patch_size (got {} / {})",
                 PATCH_SIZES, self.patch_size, self.patch_stride
+            )));
+        }
+        if !(self.descent_step > 0.0 && self.descent_step <= 1.0) {
+            return Err(crate::RomoError::Options(format!(
+                "DIS: descent_step must be in (0, 1] (got {})",
+                self.descent_step
             )));
         }
         if !(0.0..2.0).contains(&self.variational.omega) || self.variational.alpha < 0.0 {
@@ -257,7 +286,7 @@ impl Img<'_> {
     /// when the distance stops decreasing; a result farther than `P` from
     /// the start is rejected.
     #[inline(always)]
-    fn align<const P: usize>(&self, p: &Patch, start: Cand, iters: usize) -> Cand {
+    fn align<const P: usize>(&self, p: &Patch, start: Cand, iters: usize, step: f32) -> Cand {
         let n = (P * P) as f32;
         let mut cur = start;
         let mut best = (start, f32::INFINITY);
@@ -274,8 +303,8 @@ impl Img<'_> {
                 break;
             }
             prev = ssd;
-            let bx = bx - s1 * p.sgx / n;
-            let by = by - s1 * p.sgy / n;
+            let bx = step * (bx - s1 * p.sgx / n);
+            let by = step * (by - s1 * p.sgy / n);
             cur.0 -= p.hinv[0] * bx + p.hinv[1] * by;
             cur.1 -= p.hinv[1] * bx + p.hinv[2] * by;
         }
@@ -314,6 +343,7 @@ struct StripeCtx<'a> {
     nx: usize,
     iters: usize,
     search_radius: usize,
+    step: f32,
 }
 
 /// Two propagation + descent passes over one stripe of patch rows
@@ -361,7 +391,7 @@ fn stripe<const P: usize>(ctx: &StripeCtx, first_row: usize, s: &mut [Cand]) {
                         try_cand(k + nx, &mut best);
                     }
                 }
-                s[k] = img.align::<P>(p, best.1, per_pass);
+                s[k] = img.align::<P>(p, best.1, per_pass, ctx.step);
             }
         }
     }
@@ -438,6 +468,7 @@ impl Dis {
             patches: &patches,
             nx,
             iters: o.grad_descent_iters,
+            step: o.descent_step,
             search_radius: if lv.search { o.coarse_search_radius } else { 0 },
         };
         s.par_chunks_mut(stripe_rows * nx)
@@ -654,7 +685,6 @@ mod tests {
         let tex = noise_texture(w + 64, h + 64);
         let i1 = Plane::from_fn(w, h, |x, y| tex(x as f32 + 8.0, y as f32 + 24.0));
         let i0 = Plane::from_fn(w, h, |x, y| tex(x as f32 + tu + 8.0, y as f32 + tv + 24.0));
-        let est = Dis::default().compute(&i0, &i1).unwrap();
         let gt = Flow {
             u: Plane::filled(w, h, tu),
             v: Plane::filled(w, h, tv),
@@ -666,8 +696,10 @@ mod tests {
                 x >= 10.0 && y >= 10.0 && x < (w - 10) as f32 && y < (h - 10) as f32
             })
             .collect();
+        // Only the default: the damped large_motion preset cannot travel
+        // this far at the coarsest level (EPE 49 px; see its doc).
+        let est = Dis::default().compute(&i0, &i1).unwrap();
         let e = epe(&est, &gt, Some(&mask));
-        eprintln!("large translation EPE {e}");
         assert!(e < 0.5, "EPE {e} >= 0.5");
     }
 
