@@ -26,7 +26,8 @@ pub struct Args {
     /// The small scene and fewer steps: a check that everything runs (< 2 min).
     #[arg(long)]
     pub quick: bool,
-    /// Training steps per variant (default: 2000, quick: 200).
+    /// Training steps per variant (default: 800, quick: 200; the 10-minute
+    /// budget on 2 cores, see the README).
     #[arg(long)]
     pub steps: Option<usize>,
     /// Training backend.
@@ -36,7 +37,8 @@ pub struct Args {
     /// COLMAP on all 90 demo frames takes tens of minutes on 2 cores.
     #[arg(long)]
     pub pose_stride: Option<usize>,
-    /// Integer downscale of the frames for training and testing (default: 2).
+    /// Integer downscale of the frames for training and testing (default: 4,
+    /// i.e. 160×90; quick: 2, i.e. 160×120).
     #[arg(long)]
     pub downscale: Option<u32>,
     /// Skip the COLMAP runs (pose table left empty).
@@ -391,8 +393,11 @@ pub fn run(args: &Args, ctx: &Ctx) -> Result<serde_json::Value> {
     }
 
     // 4. + 5. Training on the ground-truth poses, four ways, evaluated on the clean held-out views.
-    let steps = args.steps.unwrap_or(if args.quick { 200 } else { 2000 });
-    let downscale = args.downscale.unwrap_or(2).max(1);
+    let steps = args.steps.unwrap_or(if args.quick { 200 } else { 800 });
+    let downscale = args
+        .downscale
+        .unwrap_or(if args.quick { 2 } else { 4 })
+        .max(1);
     let names = (train.as_slice(), test.as_slice());
     let mut view_rows: Vec<(String, crate::cmd::train_common::VariantResult)> = Vec::new();
     for (i, (key, label)) in VARIANTS.iter().enumerate() {
