@@ -47,27 +47,7 @@ pub fn noise_gate(opacity: f32, k: f32, t: f32) -> f32 {
 
 /// Σ ε for a splat: R (s² ⊙ (Rᵀ ε)), R from the normalised quaternion.
 pub fn covariance_times(q: [f32; 4], log_scale: [f32; 3], e: [f32; 3]) -> [f32; 3] {
-    let n = (q[0] * q[0] + q[1] * q[1] + q[2] * q[2] + q[3] * q[3])
-        .sqrt()
-        .max(1e-12);
-    let (w, x, y, z) = (q[0] / n, q[1] / n, q[2] / n, q[3] / n);
-    let r = [
-        [
-            1.0 - 2.0 * (y * y + z * z),
-            2.0 * (x * y - w * z),
-            2.0 * (x * z + w * y),
-        ],
-        [
-            2.0 * (x * y + w * z),
-            1.0 - 2.0 * (x * x + z * z),
-            2.0 * (y * z - w * x),
-        ],
-        [
-            2.0 * (x * z - w * y),
-            2.0 * (y * z + w * x),
-            1.0 - 2.0 * (x * x + y * y),
-        ],
-    ];
+    let r = crate::strategy::rotation(q);
     let mut local = [0.0f32; 3];
     for (c, l) in local.iter_mut().enumerate() {
         let s = (2.0 * log_scale[c]).exp();
