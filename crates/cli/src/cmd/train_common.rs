@@ -86,14 +86,10 @@ pub fn train_and_eval(
         "extra".into(),
         "--out".into(),
         render_dir.display().to_string(),
+        // Render at the training resolution.
+        "--downscale".into(),
+        cli.args.downscale.to_string(),
     ];
-    // Render at the training resolution.
-    let mut rargv = rargv.to_vec();
-    if let Some(i) = extra_args.iter().position(|a| a == "--downscale")
-        && let Some(d) = extra_args.get(i + 1)
-    {
-        rargv.extend(["--downscale".to_string(), d.clone()]);
-    }
     let rcli = RenderCli::try_parse_from(&rargv).context("render options")?;
     let rendered = super::render::run(&rcli.args, ctx)?;
     let renders = rendered["images"]
