@@ -20,7 +20,9 @@ struct ProjectedSplat {
     color_r: f32,
     color_g: f32,
     color_b: f32,
-    pad: f32,
+    // Tile-binning half extents in pixels, x in the low 16 bits, y in the
+    // high 16 (`ProjectedSplat::_pad` on the Rust side; see `tile_extent`).
+    extent: u32,
 }
 
 // Linear invocation index for 1D work spread over a 2D grid of workgroups
@@ -29,15 +31,38 @@ fn linear_index(wid: vec3<u32>, nwg: vec3<u32>, lid: u32, wg_size: u32) -> u32 {
     return (wid.y * nwg.x + wid.x) * wg_size + lid;
 }
 
+// Largest tile extent (pixels): keeps the packed pair a finite f32 bit
+// pattern on the Rust side (`reference::project::MAX_EXTENT`).
+const MAX_EXTENT: f32 = 32639.0;
+
+// gsplat's opacity-aware per-axis tile extents, packed (x low, y high 16
+// bits): α = o·G ≥ 1/255 only within Mahalanobis distance
+// sqrt(2 ln(255 o)), so k = min(3, that) and the half extents are
+// ceil(k·sqrt(Σ'xx)), ceil(k·sqrt(Σ'yy)) of the dilated covariance; 0 (no
+// tiles) when 255·o ≤ 1. Mirrors `reference::project::tile_extent`.
+fn tile_extent(sxx: f32, syy: f32, o: f32) -> u32 {
+    let th = 255.0 * o;
+    if (!(th > 1.0)) {
+        return 0u;
+    }
+    let k = min(sqrt(2.0 * log(th)), 3.0);
+    let ex = min(ceil(k * sqrt(max(sxx, 0.0))), MAX_EXTENT);
+    let ey = min(ceil(k * sqrt(max(syy, 0.0))), MAX_EXTENT);
+    return u32(ex) | (u32(ey) << 16u);
+}
+
 // Tiles touched by a projected splat: [min.xy, max.zw) in tile units, clamped
-// to the grid. Radius 0 (culled) gives an empty rectangle.
+// to the grid, from its mean and packed per-axis extents. Radius 0 (culled)
+// or a zero extent gives an empty rectangle. Mirrors
+// `reference::rasterize::tile_rect`.
 fn tile_rect(p: ProjectedSplat, grid: vec2<u32>) -> vec4<u32> {
-    if (!(p.radius > 0.0)) {
+    let ext = vec2<f32>(f32(p.extent & 0xffffu), f32(p.extent >> 16u));
+    if (!(p.radius > 0.0 && ext.x > 0.0 && ext.y > 0.0)) {
         return vec4<u32>(0u, 0u, 0u, 0u);
     }
     let ts = f32(TILE_SIZE);
-    let lo = vec2<f32>(p.mean_x - p.radius, p.mean_y - p.radius) / ts;
-    let hi = vec2<f32>(p.mean_x + p.radius, p.mean_y + p.radius) / ts;
+    let lo = vec2<f32>(p.mean_x - ext.x, p.mean_y - ext.y) / ts;
+    let hi = vec2<f32>(p.mean_x + ext.x, p.mean_y + ext.y) / ts;
     let gmax = vec2<f32>(grid);
     let mn = clamp(floor(lo), vec2<f32>(0.0), gmax);
     let mx = clamp(ceil(hi), vec2<f32>(0.0), gmax);

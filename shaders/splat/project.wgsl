@@ -44,6 +44,8 @@ fn project_main(@builtin(workgroup_id) wid: vec3<u32>, @builtin(num_workgroups) 
             out.conic_b = it.conic.y;
             out.conic_c = it.conic.z;
             out.opacity = it.sig * it.comp;
+            let lp = cam.background.w;
+            out.extent = tile_extent(it.cov2d.x + lp, it.cov2d.z + lp, out.opacity);
             out.color_r = col.x;
             out.color_g = col.y;
             out.color_b = col.z;

@@ -65,6 +65,35 @@ fn isotropic_known_answer() {
     assert_eq!(out.image[0], 0.25);
 }
 
+/// The packed tile extents of a projected splat, checked against an
+/// independent derivation: from Σ' = conic⁻¹ and k = min(3, sqrt(2 ln(255 o)))
+/// the extents are ceil(k·sqrt(Σ'ₓₓ)), ceil(k·sqrt(Σ'ᵧᵧ)) (0 when 255 o ≤ 1),
+/// and never smaller than the 3σ circle's bounding box would allow to be
+/// dropped: both ≤ the circular radius.
+fn extent_of(s: &ProjectedSplat) -> [f32; 2] {
+    let bits = s._pad.to_bits();
+    let e = [(bits & 0xffff) as f32, (bits >> 16) as f32];
+    let [a, b, c] = s.conic.map(|v| v as f64);
+    let det = a * c - b * b;
+    let (sxx, syy) = (c / det, a / det);
+    let th = 255.0 * s.opacity as f64;
+    if th <= 1.0 {
+        assert_eq!(e, [0.0, 0.0], "transparent splat has tiles: {s:?}");
+        return e;
+    }
+    let k = (2.0 * th.ln()).sqrt().min(3.0);
+    for (got, var) in e.iter().zip([sxx, syy]) {
+        let want = k * var.sqrt();
+        // f32 rounding of conic vs covariance: ceil may land one pixel either way.
+        assert!(
+            (*got as f64 - want.ceil()).abs() <= 1.0 && *got as f64 >= want - 1e-3,
+            "extent {got} vs {want}: {s:?}"
+        );
+        assert!(*got <= s.radius, "extent {got} beyond radius {}", s.radius);
+    }
+    e
+}
+
 /// Composite every pixel over all splats sorted by depth, no tiles.
 fn brute_force(p: &[ProjectedSplat], cam: &RenderCamera, bg: [f32; 3]) -> Vec<f32> {
     let mut order: Vec<usize> = (0..p.len()).filter(|&i| p[i].radius > 0.0).collect();
@@ -78,16 +107,16 @@ fn brute_force(p: &[ProjectedSplat], cam: &RenderCamera, bg: [f32; 3]) -> Vec<f3
             let mut c = [0.0f32; 3];
             for &i in &order {
                 let s = &p[i];
-                // Splats only reach pixels inside their bounding square.
-                if (s.mean2d[0] - px).abs() > s.radius + 16.0
-                    || (s.mean2d[1] - py).abs() > s.radius + 16.0
-                {
+                // Splats only reach the tiles of their per-axis extents
+                // (opacity-aware, gsplat style; checked in `extent_of`).
+                let [ex, ey] = extent_of(s);
+                if ex == 0.0 || ey == 0.0 {
                     continue;
                 }
-                let tx0 = ((s.mean2d[0] - s.radius) / 16.0).floor().max(0.0) as usize;
-                let tx1 = ((s.mean2d[0] + s.radius) / 16.0).ceil() as usize;
-                let ty0 = ((s.mean2d[1] - s.radius) / 16.0).floor().max(0.0) as usize;
-                let ty1 = ((s.mean2d[1] + s.radius) / 16.0).ceil() as usize;
+                let tx0 = ((s.mean2d[0] - ex) / 16.0).floor().max(0.0) as usize;
+                let tx1 = ((s.mean2d[0] + ex) / 16.0).ceil() as usize;
+                let ty0 = ((s.mean2d[1] - ey) / 16.0).floor().max(0.0) as usize;
+                let ty1 = ((s.mean2d[1] + ey) / 16.0).ceil() as usize;
                 if !(tx0..tx1).contains(&(x / 16)) || !(ty0..ty1).contains(&(y / 16)) {
                     continue;
                 }

@@ -70,6 +70,8 @@ pub struct GpuBackend {
     /// Record per-dispatch timestamps in the next steps (see [`GpuBackend::last_timings`]).
     pub profile: bool,
     timings: Timings,
+    /// (tile, splat) pairs of the last step's render.
+    intersections: u32,
 }
 
 fn unflat<const K: usize>(v: &[f32]) -> Vec<[f32; K]> {
@@ -99,6 +101,7 @@ impl GpuBackend {
             adam_config: AdamConfig::default(),
             profile: false,
             timings: Vec::new(),
+            intersections: 0,
         })
     }
 
@@ -106,6 +109,11 @@ impl GpuBackend {
     /// and the device has timestamp queries).
     pub fn last_timings(&self) -> &Timings {
         &self.timings
+    }
+
+    /// Number of (tile, splat) intersections in the last step's render.
+    pub fn last_intersections(&self) -> u32 {
+        self.intersections
     }
 
     fn upload_view(&self, input: &StepInput<'_>) -> ViewCache {
@@ -410,6 +418,7 @@ impl TrainBackend for GpuBackend {
         let visible: u32 = ctx.read::<u32>(&st.stats.visible, 1)?[0];
         timings.push(("host:stats_readback", t_stats.elapsed().as_secs_f64() * 1e3));
         self.timings = timings;
+        self.intersections = fs.intersections;
         Ok(StepStats {
             loss: loss as f32,
             l1: l1 as f32,

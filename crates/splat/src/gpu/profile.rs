@@ -27,7 +27,9 @@ fn median(v: &mut [f64]) -> f64 {
 /// `(kernel entry point, median ms per step)` sorted by time (largest first),
 /// plus `"kernels_total"` (Σ of the kernel medians) and `"step_wall"`: the
 /// median wall-clock time of a whole step. Entries named `host:*` are
-/// wall-clock host sections (submit + wait, readbacks, CPU work) of a step.
+/// wall-clock host sections (submit + wait, readbacks, CPU work) of a step;
+/// `count:intersections` is the median number of (tile, splat) pairs (not a
+/// time, left out of `kernels_total`).
 /// Fails with `GpuError::InvalidInput` when the device lacks timestamp queries.
 pub fn profile_step(
     splats: &Splats,
@@ -53,11 +55,13 @@ pub fn profile_step(
     b.profile = true;
     let mut per: BTreeMap<&'static str, Vec<f64>> = BTreeMap::new();
     let mut wall = Vec::with_capacity(steps);
+    let mut inter = Vec::with_capacity(steps);
     for s in 0..steps {
         let t0 = std::time::Instant::now();
         b.step(input)
             .map_err(|e| GpuError::InvalidInput(e.to_string()))?;
         wall.push(t0.elapsed().as_secs_f64() * 1e3);
+        inter.push(b.last_intersections() as f64);
         let mut this: BTreeMap<&'static str, f64> = BTreeMap::new();
         for (name, ms) in b.last_timings() {
             *this.entry(name).or_insert(0.0) += ms;
@@ -78,10 +82,11 @@ pub fn profile_step(
     out.sort_by(|a, b| b.1.total_cmp(&a.1));
     let kernels: f64 = out
         .iter()
-        .filter(|(k, _)| !k.starts_with("host:"))
+        .filter(|(k, _)| !k.starts_with("host:") && !k.starts_with("count:"))
         .map(|(_, v)| v)
         .sum();
     out.push(("kernels_total".to_string(), kernels));
     out.push(("step_wall".to_string(), median(&mut wall)));
+    out.push(("count:intersections".to_string(), median(&mut inter)));
     Ok(out)
 }

@@ -7,6 +7,12 @@
 //! at t with t.x/t.z and t.y/t.z clamped to ±1.3·tan(fov/2) (INRIA), where
 //! tan(fovx/2) = width / (2 fx); Σ' = J W Σ Wᵀ Jᵀ + low_pass·I; conic = Σ'⁻¹;
 //! radius = ceil(3·sqrt(λ_max)) with λ_max = mid + sqrt(max(0.1, mid² − det));
+//! tile extents (gsplat's opacity-aware per-axis bounds, used only for tile
+//! binning): with o the final opacity, a Gaussian reaches α ≥ 1/255 only
+//! within Mahalanobis distance sqrt(2·ln(255·o)), so with
+//! k = min(3, sqrt(2·ln(255·o))) the extents are ceil(k·sqrt(Σ'ₓₓ)) and
+//! ceil(k·sqrt(Σ'ᵧᵧ)) pixels (0, no tiles, when 255·o ≤ 1), at most
+//! [`MAX_EXTENT`]; they travel packed in `ProjectedSplat::_pad` ([`pack_extent`]);
 //! colour from SH (+0.5, clamped at 0); opacity = sigmoid(logit), times
 //! sqrt(max(0, det(Σ'−low_pass·I)/det(Σ'))) in antialiased mode (Mip-Splatting
 //! / gsplat). Pixel centres are at integer + 0.5, so mean2d = f·x/z + c.
@@ -33,6 +39,40 @@ pub struct ProjectedT<T> {
     pub conic: [T; 3],
     pub opacity: T,
     pub color: [T; 3],
+    /// Tile-binning half extents in pixels (x, y), integers ≤ [`MAX_EXTENT`];
+    /// 0 = no tiles.
+    pub extent: [T; 2],
+}
+
+/// Largest tile extent in pixels: keeps the packed pair a finite f32 bit
+/// pattern (high half ≤ 0x7f7f).
+pub const MAX_EXTENT: u32 = 0x7f7f;
+
+/// Pack per-axis tile extents into the bits of `ProjectedSplat::_pad`
+/// (x in the low 16 bits, y in the high 16 bits), as `common.wgsl` reads them.
+pub fn pack_extent(e: [f32; 2]) -> f32 {
+    let c = |v: f32| (v.max(0.0) as u32).min(MAX_EXTENT);
+    f32::from_bits(c(e[0]) | (c(e[1]) << 16))
+}
+
+/// Inverse of [`pack_extent`].
+pub fn unpack_extent(bits: f32) -> [f32; 2] {
+    let b = bits.to_bits();
+    [(b & 0xffff) as f32, (b >> 16) as f32]
+}
+
+/// Opacity-aware per-axis tile extents of a splat with dilated 2D covariance
+/// diagonal (`sxx`, `syy`) and final opacity `o` (see the module header).
+pub fn tile_extent<T: Real>(sxx: T, syy: T, o: T) -> [T; 2] {
+    let z0 = T::default();
+    let th = T::c(255.0) * o;
+    if !(th > T::c(1.0)) {
+        return [z0, z0];
+    }
+    let k = (T::c(2.0) * th.ln()).sqrt().min(T::c(3.0));
+    let cap = T::c(MAX_EXTENT as f64);
+    let e = |s: T| (k * s.max(z0).sqrt()).ceil().min(cap);
+    [e(sxx), e(syy)]
 }
 
 impl From<ProjectedT<f32>> for ProjectedSplat {
@@ -44,7 +84,7 @@ impl From<ProjectedT<f32>> for ProjectedSplat {
             conic: p.conic,
             opacity: p.opacity,
             color: p.color,
-            _pad: 0.0,
+            _pad: pack_extent(p.extent),
         }
     }
 }
@@ -58,6 +98,7 @@ impl From<&ProjectedSplat> for ProjectedT<f32> {
             conic: p.conic,
             opacity: p.opacity,
             color: p.color,
+            extent: unpack_extent(p._pad),
         }
     }
 }
@@ -297,13 +338,15 @@ pub fn project_one<T: Real>(
         it.color_clamped[ch] = v < z0;
         color[ch] = v.max(z0);
     }
+    let opacity = it.sigmoid * it.comp;
     let p = ProjectedT {
         mean2d,
         depth: tz,
         radius,
         conic,
-        opacity: it.sigmoid * it.comp,
+        opacity,
         color,
+        extent: tile_extent(a, c, opacity),
     };
     let ok = p
         .mean2d

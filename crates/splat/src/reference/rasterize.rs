@@ -1,9 +1,10 @@
 //! Reference tile rasterizer (Kerbl et al. 2023 §6, INRIA `forward.cu`
 //! `renderCUDA`), generic over f32/f64.
 //!
-//! Binning: a splat with radius r > 0 at mean m touches the tiles
-//! `[floor((m−r)/16), ceil((m+r)/16))` on each axis, clamped to the grid
-//! ([`tile_rect`], which the GPU binning kernel mirrors). Each tile's list is
+//! Binning: a splat with radius > 0, mean m and per-axis tile extents e
+//! (opacity-aware, see `reference::project`) touches the tiles
+//! `[floor((m−e)/16), ceil((m+e)/16))` on each axis, clamped to the grid
+//! ([`tile_rect`], which the GPU binning kernel mirrors); extent 0 = none. Each tile's list is
 //! sorted by (depth, splat index) — what a stable radix sort on the depth
 //! bits of index-ordered keys produces.
 //!
@@ -25,19 +26,25 @@ pub const ALPHA_MIN: f64 = 1.0 / 255.0;
 /// Compositing stops when the next transmittance would fall below this.
 pub const T_MIN: f64 = 1e-4;
 
-/// Tiles `[x0, y0, x1, y1)` touched by a splat; `None` when empty.
-pub fn tile_rect(mean2d: [f32; 2], radius: f32, grid: (u32, u32)) -> Option<[u32; 4]> {
-    if !(radius > 0.0) {
+/// Tiles `[x0, y0, x1, y1)` touched by a splat of radius `radius` (0 =
+/// culled) and tile extents `extent` (pixels per axis); `None` when empty.
+pub fn tile_rect(
+    mean2d: [f32; 2],
+    radius: f32,
+    extent: [f32; 2],
+    grid: (u32, u32),
+) -> Option<[u32; 4]> {
+    if !(radius > 0.0 && extent[0] > 0.0 && extent[1] > 0.0) {
         return None;
     }
     let ts = TILE_SIZE as f32;
     let lo = |v: f32, n: u32| (v / ts).floor().clamp(0.0, n as f32) as u32;
     let hi = |v: f32, n: u32| (v / ts).ceil().clamp(0.0, n as f32) as u32;
     let r = [
-        lo(mean2d[0] - radius, grid.0),
-        lo(mean2d[1] - radius, grid.1),
-        hi(mean2d[0] + radius, grid.0),
-        hi(mean2d[1] + radius, grid.1),
+        lo(mean2d[0] - extent[0], grid.0),
+        lo(mean2d[1] - extent[1], grid.1),
+        hi(mean2d[0] + extent[0], grid.0),
+        hi(mean2d[1] + extent[1], grid.1),
     ];
     (r[2] > r[0] && r[3] > r[1]).then_some(r)
 }
@@ -48,7 +55,14 @@ pub fn bin<T: Real>(proj: &[ProjectedT<T>], cam: &RenderCamera) -> (Vec<[u32; 2]
     let n_tiles = (grid.0 * grid.1) as usize;
     let rects: Vec<Option<[u32; 4]>> = proj
         .iter()
-        .map(|p| tile_rect(p.mean2d.map(T::to_f32), p.radius.to_f32(), grid))
+        .map(|p| {
+            tile_rect(
+                p.mean2d.map(T::to_f32),
+                p.radius.to_f32(),
+                p.extent.map(T::to_f32),
+                grid,
+            )
+        })
         .collect();
     let mut counts = vec![0u32; n_tiles + 1];
     for r in rects.iter().flatten() {

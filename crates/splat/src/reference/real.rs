@@ -32,6 +32,8 @@ pub trait Real:
     fn to_f32(self) -> f32;
     fn sqrt(self) -> Self;
     fn exp(self) -> Self;
+    /// Natural logarithm.
+    fn ln(self) -> Self;
     fn ceil(self) -> Self;
     fn floor(self) -> Self;
     fn abs(self) -> Self;
@@ -62,6 +64,10 @@ macro_rules! impl_real {
             #[inline]
             fn exp(self) -> Self {
                 <$t>::exp(self)
+            }
+            #[inline]
+            fn ln(self) -> Self {
+                <$t>::ln(self)
             }
             #[inline]
             fn ceil(self) -> Self {
