@@ -7,14 +7,15 @@
 //! `train::loss::loss_and_grad`).
 
 use super::adam::{Adam, AdamArgs, AdamUniforms};
-use super::backward::{BackwardArgs, BackwardKernels, projected_grads_buffer, record_backward};
+use super::backward::{BackwardArgs, BackwardKernels, record_backward};
 use super::densify_stats::{DensifyStatsKernel, StatsArgs, StatsBuffers};
-use super::forward::{ForwardKernels, Timings, forward, upload_splats};
-use super::kernel::Recorder;
+use super::forward::{ForwardInput, ForwardKernels, Timings, forward, forward_in, upload_splats};
+use super::kernel::{Recorder, Scratch};
 use super::loss::{Loss, LossArgs, LossUniforms, blocks};
 use super::mcmc::McmcKernels;
 use super::project::ParamBuffers;
 use super::project_backward::GradBuffers;
+use super::rasterize_backward::GRAD_STRIDE;
 use super::ssim::{Ssim, SsimArgs};
 use super::{GpuContext, GpuError, GpuOptions};
 use crate::backend::{MeansNoise, Regularization};
@@ -56,8 +57,9 @@ pub struct GpuBackend {
     adam: Adam,
     loss: Loss,
     ssim: Ssim,
-    /// Grow-only scratch of the D-SSIM kernel (2 × 15 planar maps).
-    ssim_scratch: Option<[wgpu::Buffer; 2]>,
+    /// Every transient buffer of a step (render, loss, D-SSIM maps, sort and
+    /// scan scratch, projected gradients), kept across steps.
+    scratch: Scratch,
     stats_k: DensifyStatsKernel,
     /// MCMC position noise and regulariser kernels.
     mcmc: McmcKernels,
@@ -91,7 +93,7 @@ impl GpuBackend {
             adam: Adam::new(&ctx),
             loss: Loss::new(&ctx),
             ssim: Ssim::new(&ctx),
-            ssim_scratch: None,
+            scratch: Scratch::default(),
             stats_k: DensifyStatsKernel::new(&ctx),
             mcmc: McmcKernels::new(&ctx),
             reg: Regularization::default(),
@@ -200,13 +202,22 @@ impl TrainBackend for GpuBackend {
         };
         let ctx = &self.ctx;
         let cam = input.camera;
-        let (fs, mut timings) =
-            forward(ctx, &self.fwd, &st.params, cam, &input.render, self.profile)?;
+        let allocs_before = self.scratch.allocations;
+        let (fs, mut timings, mut rec) = forward_in(
+            ctx,
+            &self.fwd,
+            Some(&mut self.scratch),
+            &ForwardInput {
+                params: &st.params,
+                cam,
+                opts: &input.render,
+                profile: self.profile,
+            },
+        )?;
         let pixels = cam.width * cam.height;
-        let v_image = ctx.storage("v_image", pixels as u64 * 12);
+        let v_image = rec.storage("v_image", pixels as u64 * 12);
         let lambda = input.loss.ssim_weight as f64;
-        let mut rec = Recorder::new(ctx, self.profile);
-        let partials = ctx.storage("loss_partials", blocks(pixels) as u64 * 8);
+        let partials = rec.storage("loss_partials", blocks(pixels) as u64 * 8);
         let scale = if view.kept > 0.0 {
             (1.0 - lambda) / (3.0 * view.kept)
         } else {
@@ -236,23 +247,12 @@ impl TrainBackend for GpuBackend {
                 },
             },
         )?;
-        let ssim_partials = ctx.storage("ssim_partials", blocks(pixels) as u64 * 4);
+        let ssim_partials = rec.storage("ssim_partials", blocks(pixels) as u64 * 4);
         if lambda > 0.0 {
             // D-SSIM on the device, added to the L1 gradient in v_image.
             let need = super::ssim::SCRATCH_MAPS * pixels as u64 * 4;
-            if self
-                .ssim_scratch
-                .as_ref()
-                .is_none_or(|s| s[0].size() < need)
-            {
-                self.ssim_scratch = Some([
-                    ctx.storage("ssim_scratch0", need),
-                    ctx.storage("ssim_scratch1", need),
-                ]);
-            }
-            let Some([s0, s1]) = self.ssim_scratch.as_ref() else {
-                return Err(SplatError::Invalid("SSIM scratch missing".into()));
-            };
+            let s0 = rec.storage("ssim_scratch0", need);
+            let s1 = rec.storage("ssim_scratch1", need);
             self.ssim.dispatch(
                 ctx,
                 &mut rec,
@@ -263,7 +263,7 @@ impl TrainBackend for GpuBackend {
                     has_mask: view.mask.is_some(),
                     v_image: &v_image,
                     partials: &ssim_partials,
-                    scratch: [s0, s1],
+                    scratch: [&s0, &s1],
                     width: cam.width,
                     height: cam.height,
                     norm: norm as f32,
@@ -271,7 +271,7 @@ impl TrainBackend for GpuBackend {
                 },
             )?;
         }
-        let v_proj = projected_grads_buffer(ctx, st.params.n);
+        let v_proj = rec.storage("v_proj", st.params.n as u64 * GRAD_STRIDE * 4);
         record_backward(
             ctx,
             &self.bwd,
@@ -394,9 +394,10 @@ impl TrainBackend for GpuBackend {
         }
         let t_sub = std::time::Instant::now();
         timings.extend(rec.finish()?);
+        timings.push(("host:step_submit_wait", t_sub.elapsed().as_secs_f64() * 1e3));
         timings.push((
-            "host:backward_submit_wait",
-            t_sub.elapsed().as_secs_f64() * 1e3,
+            "count:buffer_allocations",
+            (self.scratch.allocations - allocs_before) as f64,
         ));
         let t_stats = std::time::Instant::now();
         let parts: Vec<f32> = ctx.read(&partials, blocks(pixels) as usize * 2)?;

@@ -5,10 +5,14 @@
 //! sorted by (depth, splat index) exactly as `reference::rasterize::bin`.
 //!
 //! One readback per render: the number of (tile, splat) intersections, to size
-//! the key buffers.
+//! the key buffers (≈ 0.05 ms on lavapipe, measured; cheaper than sorting
+//! slack keys sized from the previous step). Training renders through
+//! [`forward_in`] with a persistent [`Scratch`] and appends its backward pass
+//! to the second recording, so a step is two submits and allocates nothing
+//! once sizes settle.
 
 use super::emit_keys::{BinUniforms, EmitArgs, EmitKeys};
-use super::kernel::Recorder;
+use super::kernel::{Recorder, Scratch};
 use super::prefix_sum::{PrefixSum, ScanArgs};
 use super::project::{CameraUniforms, ParamBuffers, Project, ProjectArgs};
 use super::radix_sort::{RadixSort, SortArgs, bits_for};
@@ -84,6 +88,15 @@ pub fn upload_splats(ctx: &GpuContext, s: &Splats) -> Result<ParamBuffers, GpuEr
     })
 }
 
+/// What to render.
+pub struct ForwardInput<'a> {
+    pub params: &'a ParamBuffers,
+    pub cam: &'a RenderCamera,
+    pub opts: &'a RenderOptions,
+    /// Time every dispatch (timestamp queries).
+    pub profile: bool,
+}
+
 /// Record and run the forward render of resident parameters. Returns the
 /// state (for backward) and, with `profile`, per-dispatch timings.
 pub fn forward(
@@ -94,6 +107,40 @@ pub fn forward(
     opts: &RenderOptions,
     profile: bool,
 ) -> Result<(ForwardState, Timings), GpuError> {
+    let input = ForwardInput {
+        params,
+        cam,
+        opts,
+        profile,
+    };
+    let (state, mut timings, rec) = forward_in(ctx, k, None, &input)?;
+    let t_sub = std::time::Instant::now();
+    timings.extend(rec.finish()?);
+    timings.push((
+        "host:forward2_submit_wait",
+        t_sub.elapsed().as_secs_f64() * 1e3,
+    ));
+    Ok((state, timings))
+}
+
+/// The forward render in two recordings: the first (projection, depth sort,
+/// tile counts, scan) is submitted to read the intersection count back; the
+/// second (emit, tile sort, ranges, rasterize) is returned *unsubmitted* so a
+/// training step can append its backward pass and submit once. With
+/// `scratch`, every buffer of the render persists there across calls (the
+/// returned state's buffers are then overwritten by the next call).
+pub fn forward_in<'r>(
+    ctx: &'r GpuContext,
+    k: &ForwardKernels,
+    mut scratch: Option<&'r mut Scratch>,
+    input: &ForwardInput,
+) -> Result<(ForwardState, Timings, Recorder<'r>), GpuError> {
+    let ForwardInput {
+        params,
+        cam,
+        opts,
+        profile,
+    } = *input;
     crate::error::check_camera(cam).map_err(|e| GpuError::InvalidInput(e.to_string()))?;
     let low_pass_ok = opts.low_pass.is_finite() && opts.low_pass >= 0.0;
     if !low_pass_ok || !opts.background.iter().all(|v| v.is_finite()) {
@@ -114,11 +161,6 @@ pub fn forward(
     }
     let cam_u = CameraUniforms::new(cam, opts, n, params.sh_degree);
     let cam_buf = ctx.uniform("camera", &cam_u);
-    let projected = ctx.storage("projected", n as u64 * 48);
-    let depth_keys = ctx.storage("depth_keys", n as u64 * 4);
-    let order = ctx.storage("order", n as u64 * 4);
-    let counts = ctx.storage("tile_counts", n as u64 * 4);
-    let offsets = ctx.storage("tile_offsets", (n as u64 + 1) * 4);
     let bin_u = ctx.uniform(
         "bin_u",
         &BinUniforms {
@@ -128,10 +170,20 @@ pub fn forward(
             pad: 0,
         },
     );
-    let ranges = ctx.storage("ranges", num_tiles as u64 * 8);
     let mut timings = Vec::new();
 
-    let mut rec = Recorder::new(ctx, profile);
+    let mut rec = match scratch.as_deref_mut() {
+        Some(s) => Recorder::with_scratch(ctx, profile, s),
+        None => Recorder::new(ctx, profile),
+    };
+    let projected = rec.storage("projected", n as u64 * 48);
+    let depth_keys = rec.storage("depth_keys", n as u64 * 4);
+    let order = rec.storage("order", n as u64 * 4);
+    let counts = rec.storage("tile_counts", n as u64 * 4);
+    let offsets = rec.storage("tile_offsets", (n as u64 + 1) * 4);
+    let ranges = rec.storage("ranges", num_tiles as u64 * 8);
+    // Placeholders for the key buffers in the first recording (not written there).
+    let dummy = rec.storage("dummy", 16);
     k.project.dispatch(
         ctx,
         &mut rec,
@@ -141,8 +193,6 @@ pub fn forward(
             projected: &projected,
         },
     )?;
-    // Placeholders for the key buffers in the first recording (not written there).
-    let dummy = ctx.storage("dummy", 16);
     let first = EmitArgs {
         uniforms: &bin_u,
         projected: &projected,
@@ -193,13 +243,15 @@ pub fn forward(
         )));
     }
     let total = total as u32;
-    let tile_keys = ctx.storage("tile_keys", total as u64 * 4);
-    let tile_values = ctx.storage("tile_values", total as u64 * 4);
-    let image = ctx.storage("image", pixels * 12);
-    let final_t = ctx.storage("final_t", pixels * 4);
-    let last_contrib = ctx.storage("last_contrib", pixels * 4);
-
-    let mut rec = Recorder::new(ctx, profile);
+    let mut rec = match scratch {
+        Some(s) => Recorder::with_scratch(ctx, profile, s),
+        None => Recorder::new(ctx, profile),
+    };
+    let tile_keys = rec.storage("tile_keys", total as u64 * 4);
+    let tile_values = rec.storage("tile_values", total as u64 * 4);
+    let image = rec.storage("image", pixels * 12);
+    let final_t = rec.storage("final_t", pixels * 4);
+    let last_contrib = rec.storage("last_contrib", pixels * 4);
     if total > 0 {
         let second = EmitArgs {
             tile_keys: &tile_keys,
@@ -244,12 +296,6 @@ pub fn forward(
             grid,
         },
     )?;
-    let t_sub = std::time::Instant::now();
-    timings.extend(rec.finish()?);
-    timings.push((
-        "host:forward2_submit_wait",
-        t_sub.elapsed().as_secs_f64() * 1e3,
-    ));
     Ok((
         ForwardState {
             cam: cam_buf,
@@ -267,6 +313,7 @@ pub fn forward(
             n,
         },
         timings,
+        rec,
     ))
 }
 

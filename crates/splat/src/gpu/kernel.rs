@@ -242,11 +242,48 @@ pub fn groups_1d(n: u32, wg: u32) -> [u32; 3] {
     }
 }
 
+/// Grow-only storage buffers kept across steps, one per role (`label`), so
+/// a training step allocates nothing once the sizes have settled. A buffer is
+/// reallocated only when a step needs more than its capacity, with 1.5×
+/// headroom (capped at the device's binding limit) so slowly growing counts
+/// (splats, tile intersections) reallocate rarely. Contents are unspecified
+/// (whatever the last user left); kernels never read past what they wrote
+/// this step. One `Scratch` per owner (never shared between threads: tests
+/// share one device).
+#[derive(Default)]
+pub struct Scratch {
+    buffers: std::collections::HashMap<&'static str, wgpu::Buffer>,
+    /// Buffers (re)allocated so far, for tests and the profile.
+    pub allocations: u64,
+}
+
+impl Scratch {
+    /// The buffer for `label`, at least `bytes` long.
+    pub fn get(&mut self, ctx: &GpuContext, label: &'static str, bytes: u64) -> wgpu::Buffer {
+        let need = bytes.max(16).next_multiple_of(4);
+        if let Some(b) = self.buffers.get(label)
+            && b.size() >= need
+        {
+            return b.clone();
+        }
+        let cap = (need + need / 2)
+            .min(ctx.max_binding_bytes().max(need))
+            .next_multiple_of(4);
+        let b = ctx.storage(label, cap);
+        self.allocations += 1;
+        self.buffers.insert(label, b.clone());
+        b
+    }
+}
+
 /// Records dispatches into one command encoder; optionally timestamps each.
+/// Transient buffers of the kernels come from [`Recorder::storage`]: from the
+/// attached [`Scratch`] when there is one, else freshly allocated.
 pub struct Recorder<'a> {
     ctx: &'a GpuContext,
     pub encoder: wgpu::CommandEncoder,
     timer: Option<Timer>,
+    scratch: Option<&'a mut Scratch>,
 }
 
 struct Timer {
@@ -280,6 +317,24 @@ impl<'a> Recorder<'a> {
             ctx,
             encoder,
             timer,
+            scratch: None,
+        }
+    }
+
+    /// A recorder whose transient buffers persist in `scratch`.
+    pub fn with_scratch(ctx: &'a GpuContext, profile: bool, scratch: &'a mut Scratch) -> Self {
+        let mut r = Recorder::new(ctx, profile);
+        r.scratch = Some(scratch);
+        r
+    }
+
+    /// A storage buffer of at least `bytes` for the role `label`: persistent
+    /// (see [`Scratch`]) when the recorder has one, else new. Two buffers live
+    /// at the same time in one recording must have different labels.
+    pub fn storage(&mut self, label: &'static str, bytes: u64) -> wgpu::Buffer {
+        match self.scratch.as_deref_mut() {
+            Some(s) => s.get(self.ctx, label, bytes),
+            None => self.ctx.storage(label, bytes),
         }
     }
 
@@ -323,6 +378,7 @@ impl<'a> Recorder<'a> {
             ctx,
             mut encoder,
             timer,
+            ..
         } = self;
         let resolve = timer.as_ref().filter(|t| !t.labels.is_empty()).map(|t| {
             let n = t.labels.len() as u32 * 2;

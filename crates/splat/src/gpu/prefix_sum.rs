@@ -78,9 +78,37 @@ impl PrefixSum {
         rec: &mut Recorder,
         args: &ScanArgs,
     ) -> Result<(), GpuError> {
+        self.dispatch_level(ctx, rec, args, 0)
+    }
+
+    /// One level of the recursive scan (`level` picks the scratch buffers,
+    /// which are live at the same time across levels).
+    fn dispatch_level(
+        &self,
+        ctx: &GpuContext,
+        rec: &mut Recorder,
+        args: &ScanArgs,
+        level: usize,
+    ) -> Result<(), GpuError> {
+        const SUMS: [&str; 5] = [
+            "scan_block_sums0",
+            "scan_block_sums1",
+            "scan_block_sums2",
+            "scan_block_sums3",
+            "scan_block_sums4",
+        ];
+        const SCANNED: [&str; 5] = [
+            "scan_block_offsets0",
+            "scan_block_offsets1",
+            "scan_block_offsets2",
+            "scan_block_offsets3",
+            "scan_block_offsets4",
+        ];
         let n = args.n;
         let blocks = n.div_ceil(WORKGROUP_SIZE).max(1);
-        let sums = ctx.storage("scan_block_sums", (blocks as u64 + 1) * 4);
+        // 256^4 > u32::MAX elements: four levels always suffice.
+        let lv = level.min(SUMS.len() - 1);
+        let sums = rec.storage(SUMS[lv], (blocks as u64 + 1) * 4);
         let u = ctx.uniform("scan_u", &ScanUniforms { n, pad: [0; 3] });
         let bind = self.kernel.bind(
             ctx,
@@ -96,8 +124,8 @@ impl PrefixSum {
             rec.dispatch(&self.kernel, "scan_blocks", &bind, groups)?;
         }
         if blocks > 1 {
-            let scanned = ctx.storage("scan_block_offsets", (blocks as u64 + 1) * 4);
-            self.dispatch(
+            let scanned = rec.storage(SCANNED[lv], (blocks as u64 + 1) * 4);
+            self.dispatch_level(
                 ctx,
                 rec,
                 &ScanArgs {
@@ -105,6 +133,7 @@ impl PrefixSum {
                     output: &scanned,
                     n: blocks,
                 },
+                level + 1,
             )?;
             let bind2 = self.kernel.bind(
                 ctx,

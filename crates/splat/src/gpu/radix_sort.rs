@@ -122,10 +122,10 @@ impl RadixSort {
         let n = args.n;
         let num_blocks = n.div_ceil(WORKGROUP_SIZE);
         let bytes = n as u64 * 4;
-        let keys_tmp = ctx.storage("sort_keys_tmp", bytes);
-        let values_tmp = ctx.storage("sort_values_tmp", bytes);
-        let counts = ctx.storage("sort_counts", num_blocks as u64 * 16 * 4);
-        let offsets = ctx.storage("sort_offsets", (num_blocks as u64 * 16 + 1) * 4);
+        let keys_tmp = rec.storage("sort_keys_tmp", bytes);
+        let values_tmp = rec.storage("sort_values_tmp", bytes);
+        let counts = rec.storage("sort_counts", num_blocks as u64 * 16 * 4);
+        let offsets = rec.storage("sort_offsets", (num_blocks as u64 * 16 + 1) * 4);
         let passes = args.bits.div_ceil(BITS_PER_PASS);
         let groups = groups_1d(n, WORKGROUP_SIZE);
         for pass in 0..passes {

@@ -146,3 +146,27 @@ fn tile_ranges_match_cpu() {
         );
     }
 }
+
+#[test]
+fn scratch_is_grow_only_and_reused() {
+    let Some(c) = ctx() else { return };
+    let mut s = crate::gpu::kernel::Scratch::default();
+    let a = s.get(c, "x", 1000);
+    assert_eq!(s.allocations, 1);
+    assert!(a.size() >= 1500, "1.5x headroom: {}", a.size());
+    // Smaller or within the headroom: the same buffer, no allocation.
+    let b = s.get(c, "x", 400);
+    let d = s.get(c, "x", 1400);
+    assert_eq!(s.allocations, 1);
+    assert_eq!(a, b);
+    assert_eq!(a, d);
+    // Another role gets its own buffer.
+    let e = s.get(c, "y", 400);
+    assert_ne!(a, e);
+    assert_eq!(s.allocations, 2);
+    // Past capacity: reallocated once, larger.
+    let f = s.get(c, "x", 4000);
+    assert_eq!(s.allocations, 3);
+    assert!(f.size() >= 6000);
+    assert_ne!(a, f);
+}
