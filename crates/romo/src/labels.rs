@@ -13,7 +13,9 @@
 
 use crate::flow::Flow;
 use crate::geometry::Pt;
-use crate::geometry::robust::{FitReport, RobustOptions, TwoView, fit_two_view};
+use crate::geometry::robust::{
+    FitReport, ModelSelection, RobustOptions, TwoView, fit_two_view_all,
+};
 use rand::{Rng, SeedableRng};
 use rayon::prelude::*;
 use serde::{Deserialize, Serialize};
@@ -47,6 +49,16 @@ pub struct LabelOptions {
     /// Correspondences (spread on a grid) used to fit each pair's model; the
     /// residuals are then evaluated on all (default 2000).
     pub fit_points: usize,
+    /// F-informative override (ours) of the F-vs-H selection: when the
+    /// selection rule picks the homography but the fundamental matrix still
+    /// calls at least this fraction of the fit points moving (`S_F > u·v`),
+    /// F is used. Rationale: when F absorbs an object (a panning camera
+    /// following it: car-roundabout, scooter-black) it calls almost nothing
+    /// moving (< 0.5% of points); when it does separate something, that is
+    /// the object at higher precision than H's residual, and H's extra U
+    /// is static parallax (parkour, breakdance). 0 disables. Default: see
+    /// README.
+    pub f_informative_fraction: f32,
     /// Robust estimation and model selection.
     pub robust: RobustOptions,
 }
@@ -60,6 +72,7 @@ impl Default for LabelOptions {
             l_factor: 0.15,
             min_inlier_ratio: 0.5,
             fit_points: 2000,
+            f_informative_fraction: 0.005,
             robust: RobustOptions::default(),
         }
     }
@@ -68,9 +81,13 @@ impl Default for LabelOptions {
 impl LabelOptions {
     /// Check the options.
     pub fn validate(&self) -> crate::Result<()> {
-        if self.u_factor <= self.l_factor || self.l_factor < 0.0 || self.fit_points < 15 {
+        if self.u_factor <= self.l_factor
+            || self.l_factor < 0.0
+            || self.fit_points < 15
+            || !(0.0..=1.0).contains(&self.f_informative_fraction)
+        {
             return Err(crate::RomoError::Options(
-                "labels: need u_factor > l_factor >= 0 and fit_points >= 15".into(),
+                "labels: need u_factor > l_factor >= 0, fit_points >= 15, f_informative_fraction in [0, 1]".into(),
             ));
         }
         self.robust.validate()
@@ -129,7 +146,28 @@ pub fn fit_pair(
             }
         }
     }
-    fit_two_view(&a, &b, &o.robust)
+    let fits = fit_two_view_all(&a, &b, &o.robust)?;
+    let thr = (o.u_factor * f.mean_magnitude()) as f64;
+    let nu = a
+        .iter()
+        .zip(&b)
+        .filter(|(p, q)| fits.fundamental.residual_px(**p, **q) > thr)
+        .count();
+    let frac = nu as f64 / a.len().max(1) as f64;
+    let overrule = o.f_informative_fraction > 0.0
+        && matches!(fits.chosen, TwoView::Homography(_))
+        && matches!(
+            o.robust.selection,
+            ModelSelection::Gric | ModelSelection::InlierRatio
+        )
+        && frac >= o.f_informative_fraction as f64;
+    let (m, mut rep) = if overrule {
+        (fits.fundamental, fits.fundamental_report)
+    } else {
+        (fits.chosen, fits.report)
+    };
+    rep.u_fraction_f = frac;
+    Ok((m, rep))
 }
 
 /// One side (forward or backward) of a frame's evidence.

@@ -9,7 +9,7 @@
 use crate::features::{FeatureExtractor, FeatureMap, standardise};
 use crate::flow::dis::DisOptions;
 use crate::flow::{Flow, FlowEstimator};
-use crate::geometry::robust::{FitReport, TwoView};
+use crate::geometry::robust::{FitReport, ModelSelection, TwoView};
 use crate::labels::{FrameLabels, LabelOptions, Side, cycle_valid, fit_pair, frame_labels};
 use crate::mlp::{Label, Mlp, MlpOptions, TrainReport, train};
 use crate::plane::{Plane, Rgb};
@@ -304,6 +304,7 @@ type RoundLabels = (Vec<FrameLabels>, Vec<(TwoView, FitReport)>);
 fn label_round(
     pr: &Prepared,
     moving: Option<&[Vec<bool>]>,
+    prev: Option<&[(TwoView, FitReport)]>,
     o: &RomoOptions,
     round: usize,
 ) -> Result<RoundLabels> {
@@ -322,6 +323,16 @@ fn label_round(
             let seed = o.seed ^ ((round as u64) << 32) ^ p as u64;
             let mut lo = o.labels.clone();
             lo.robust.seed = seed;
+            // A pair where F was informative in the first round keeps F:
+            // with the object excluded from the fit, F would call nothing
+            // moving and the override would not fire again.
+            if let Some(prev) = prev
+                && o.labels.f_informative_fraction > 0.0
+                && prev[p].1.model == "F"
+                && prev[p].1.u_fraction_f >= o.labels.f_informative_fraction as f64
+            {
+                lo.robust.selection = ModelSelection::Fundamental;
+            }
             fit_pair(&pr.fwd[p], &usable, &lo, seed)
                 .or_else(|_| fit_pair(&pr.fwd[p], &pr.valid_f[p], &lo, seed))
                 .map_err(|e| RomoError::Geometry(format!("pair {p}–{}: {e}", p + 1)))
@@ -428,8 +439,10 @@ pub fn segment_frames(
                 .map(|p| p.iter().map(|h| *h > o.refine.threshold).collect())
                 .collect()
         });
-        let (labels, fits) =
-            tm.time("geometry", || label_round(&pr, moving.as_deref(), o, round))?;
+        let prev = last.as_ref().map(|l| l.1.as_slice());
+        let (labels, fits) = tm.time("geometry", || {
+            label_round(&pr, moving.as_deref(), prev, o, round)
+        })?;
         let keep: Vec<bool> = labels
             .iter()
             .map(|l| l.inlier_ratio >= o.labels.min_inlier_ratio)

@@ -26,6 +26,8 @@ pub enum ModelSelection {
     Gric,
     /// Homography when its inlier count reaches `h_inlier_ratio` × F's.
     InlierRatio,
+    /// Always the homography (diagnosis; a scene without parallax).
+    Homography,
 }
 
 /// Options of the robust estimation.
@@ -119,8 +121,13 @@ pub struct FitReport {
     pub gric_f: f64,
     /// GRIC of H.
     pub gric_h: f64,
+    /// Fraction of the fit points the fundamental matrix calls moving
+    /// (`S_F > u·v`; filled by [`crate::labels::fit_pair`], NaN otherwise).
+    #[serde(default)]
+    pub u_fraction_f: f64,
 }
 
+#[derive(Clone)]
 struct Fit {
     model: TwoView,
     median_sq: f64,
@@ -232,9 +239,47 @@ pub fn gric(r2: &[f64], sigma: f64, d: f64, k: f64) -> f64 {
     rho + r.ln() * d * n + (r * n).ln() * k
 }
 
+/// Both fits of a pair: the chosen model and the fundamental matrix (which
+/// is always estimated; [`crate::labels::fit_pair`] uses it to overrule a
+/// homography choice when F is informative).
+#[derive(Debug, Clone)]
+pub struct TwoViewFits {
+    /// The model chosen by the selection rule.
+    pub chosen: TwoView,
+    /// Its report.
+    pub report: FitReport,
+    /// The fundamental matrix.
+    pub fundamental: TwoView,
+    /// Its report (GRIC fields as in `report`).
+    pub fundamental_report: FitReport,
+}
+
+fn report_of(fit: &Fit, n: usize, o: &RobustOptions, gf: f64, gh: f64) -> FitReport {
+    FitReport {
+        model: match fit.model {
+            TwoView::Fundamental(_) => "F".into(),
+            TwoView::Homography(_) => "H".into(),
+        },
+        points: n,
+        inliers: fit.inliers,
+        iterations: o.iterations,
+        median_residual_px: fit.median_sq.sqrt(),
+        sigma_px: fit.sigma,
+        gric_f: gf,
+        gric_h: gh,
+        u_fraction_f: f64::NAN,
+    }
+}
+
 /// Fit F (and H, per the selection rule) robustly to correspondences
 /// `a[i] ↔ b[i]` and choose the model. Errors when there are too few points.
 pub fn fit_two_view(a: &[Pt], b: &[Pt], o: &RobustOptions) -> crate::Result<(TwoView, FitReport)> {
+    let f = fit_two_view_all(a, b, o)?;
+    Ok((f.chosen, f.report))
+}
+
+/// As [`fit_two_view`], also returning the fundamental matrix's fit.
+pub fn fit_two_view_all(a: &[Pt], b: &[Pt], o: &RobustOptions) -> crate::Result<TwoViewFits> {
     o.validate()?;
     if a.len() != b.len() || a.len() < 15 {
         return Err(crate::RomoError::Geometry(format!(
@@ -264,24 +309,17 @@ pub fn fit_two_view(a: &[Pt], b: &[Pt], o: &RobustOptions) -> crate::Result<(Two
                 .count();
             hin as f64 >= o.h_inlier_ratio * f.inliers as f64
         }
+        (Some(_), ModelSelection::Homography) => true,
         _ => false,
     };
     let chosen = match (use_h, h) {
         (true, Some(h)) => h,
-        _ => f,
+        _ => f.clone(),
     };
-    let report = FitReport {
-        model: match chosen.model {
-            TwoView::Fundamental(_) => "F".into(),
-            TwoView::Homography(_) => "H".into(),
-        },
-        points: a.len(),
-        inliers: chosen.inliers,
-        iterations: o.iterations,
-        median_residual_px: chosen.median_sq.sqrt(),
-        sigma_px: chosen.sigma,
-        gric_f: gf,
-        gric_h: gh,
-    };
-    Ok((chosen.model, report))
+    Ok(TwoViewFits {
+        chosen: chosen.model,
+        report: report_of(&chosen, a.len(), o, gf, gh),
+        fundamental: f.model,
+        fundamental_report: report_of(&f, a.len(), o, gf, gh),
+    })
 }
