@@ -1,16 +1,27 @@
-//! Benchmark: built-in DIS flow on the MPI Sintel pairs in
-//! `../shared/data/sintel-flow` (or `$SINTEL_DIR`). Prints one JSON object:
-//! per pair EPE over all pixels and non-occluded pixels, and the median time
-//! of `reps` runs. Compare with `crates/romo/benches/opencv_dis.py`, which
-//! runs OpenCV's DIS MEDIUM on the same pairs. Skips (prints a note) when
-//! the data is absent.
+//! Benchmark: built-in DIS flow against OpenCV's DIS MEDIUM on the MPI
+//! Sintel pairs in `../shared/data/sintel-flow` (or `$SINTEL_DIR`), in one
+//! run. Prints one JSON object: per pair EPE over all and non-occluded
+//! pixels and median times of both methods, per-stage median times of ours
+//! (pyramid, and per level upsampling, preparation, patch search,
+//! densification, variational refinement), and `ratio` = our median time /
+//! OpenCV's. OpenCV runs in a `python3 benches/opencv_dis.py --serve`
+//! subprocess; each repetition runs ours and OpenCV's back to back
+//! (alternating which goes first) so both see the same machine load. When
+//! `cv2` cannot be imported the JSON says so and only ours is measured.
+//!
+//! Environment: `REPS` (default 5), `PAIRS` (comma-separated name
+//! prefixes), `PRESET=large` (`DisOptions::large_motion()`), `DIS_OPTS` (a
+//! partial `DisOptions` JSON), `OPENCV=0` (skip OpenCV), `DUMP_DIR` (write
+//! our `.flo` files). Skips (prints a note) when the data is absent.
 #![allow(clippy::unwrap_used, clippy::expect_used)]
 
-use romo::flow::dis::Dis;
+use romo::flow::dis::{Dis, DisOptions, DisTimings};
 use romo::flow::{Flow, epe};
 use romo::plane::Plane;
+use serde_json::{Value, json};
+use std::io::{BufRead, BufReader, Write};
 use std::path::Path;
-use std::time::Instant;
+use std::process::{Child, ChildStdin, ChildStdout, Command, Stdio};
 
 fn read_flo(p: &Path) -> Flow {
     let b = std::fs::read(p).unwrap();
@@ -41,6 +52,108 @@ fn gray(p: &Path) -> Plane {
     romo::plane::Rgb::from_image(&img).gray()
 }
 
+fn median(mut v: Vec<f64>) -> f64 {
+    if v.is_empty() {
+        return f64::NAN;
+    }
+    v.sort_by(|a, b| a.total_cmp(b));
+    let n = v.len();
+    if n % 2 == 1 {
+        v[n / 2]
+    } else {
+        0.5 * (v[n / 2 - 1] + v[n / 2])
+    }
+}
+
+/// OpenCV DIS in a Python subprocess (`opencv_dis.py --serve`).
+struct OpenCv {
+    child: Child,
+    tx: ChildStdin,
+    rx: BufReader<ChildStdout>,
+    version: String,
+}
+
+impl OpenCv {
+    /// Start the server; `Err(reason)` when python3 or cv2 is unavailable.
+    fn start(dir: &Path) -> Result<Self, String> {
+        let script = Path::new(env!("CARGO_MANIFEST_DIR")).join("benches/opencv_dis.py");
+        let mut child = Command::new("python3")
+            .arg(&script)
+            .arg("--serve")
+            .arg(dir)
+            .stdin(Stdio::piped())
+            .stdout(Stdio::piped())
+            .stderr(Stdio::inherit())
+            .spawn()
+            .map_err(|e| format!("python3: {e}"))?;
+        let tx = child.stdin.take().ok_or("no stdin")?;
+        let mut rx = BufReader::new(child.stdout.take().ok_or("no stdout")?);
+        let mut line = String::new();
+        rx.read_line(&mut line).map_err(|e| e.to_string())?;
+        match line.trim().strip_prefix("ready ") {
+            Some(v) => Ok(Self {
+                version: v.to_string(),
+                child,
+                tx,
+                rx,
+            }),
+            None => {
+                let _ = child.wait();
+                Err(format!("OpenCV not available ({})", line.trim()))
+            }
+        }
+    }
+
+    /// One timed run on a pair: `{"ms", "epe_all", "epe_noc"}`.
+    fn run(&mut self, pair: &str) -> Value {
+        writeln!(self.tx, "run {pair}").unwrap();
+        self.tx.flush().unwrap();
+        let mut line = String::new();
+        self.rx.read_line(&mut line).unwrap();
+        serde_json::from_str(&line).unwrap_or_else(|e| panic!("opencv_dis.py: {e}: {line}"))
+    }
+
+    fn stop(mut self) {
+        let _ = writeln!(self.tx, "quit");
+        let _ = self.child.wait();
+    }
+}
+
+/// Per-stage medians over repetitions of one pair, as a flat JSON object
+/// (`pyramid`, `final_resize`, `total`, and per stage the sum over levels
+/// plus `L<level>_<stage>`).
+fn stage_medians(ts: &[DisTimings]) -> serde_json::Map<String, Value> {
+    type Key = (String, Box<dyn Fn(&DisTimings) -> f64>);
+    let mut keys: Vec<Key> = vec![
+        ("pyramid".into(), Box::new(|t| t.pyramid_ms)),
+        ("final_resize".into(), Box::new(|t| t.final_resize_ms)),
+        ("total".into(), Box::new(|t| t.total_ms)),
+    ];
+    type Get = fn(&romo::flow::dis::LevelTimings) -> f64;
+    let stages: [(&str, Get); 5] = [
+        ("upsample", |l| l.upsample_ms),
+        ("prepare", |l| l.prepare_ms),
+        ("search", |l| l.search_ms),
+        ("densify", |l| l.densify_ms),
+        ("variational", |l| l.variational_ms),
+    ];
+    for (name, get) in stages {
+        keys.push((
+            format!("{name}_all_levels"),
+            Box::new(move |t| t.levels.iter().map(get).sum()),
+        ));
+        for (i, l) in ts[0].levels.iter().enumerate() {
+            keys.push((
+                format!("L{}_{name}", l.level),
+                Box::new(move |t| t.levels.get(i).map_or(f64::NAN, get)),
+            ));
+        }
+    }
+    keys.into_iter()
+        .map(|(k, f)| (k, json!(median(ts.iter().map(&f).collect()))))
+        .collect()
+}
+
 fn main() {
     let dir =
         std::env::var("SINTEL_DIR").unwrap_or_else(|_| "../../../shared/data/sintel-flow".into());
@@ -57,20 +170,21 @@ fn main() {
     let reps: usize = std::env::var("REPS")
         .ok()
         .and_then(|s| s.parse().ok())
-        .unwrap_or(3);
-    // DIS_OPTS: a partial DisOptions JSON (experiments); PAIRS: a
-    // comma-separated list of name prefixes to run.
-    // PRESET=large selects DisOptions::large_motion().
-    let opts: romo::flow::dis::DisOptions = match std::env::var("DIS_OPTS") {
+        .unwrap_or(5)
+        .max(1);
+    let opts: DisOptions = match std::env::var("DIS_OPTS") {
         Ok(s) => serde_json::from_str(&s).unwrap(),
-        Err(_) if std::env::var("PRESET").as_deref() == Ok("large") => {
-            romo::flow::dis::DisOptions::large_motion()
-        }
+        Err(_) if std::env::var("PRESET").as_deref() == Ok("large") => DisOptions::large_motion(),
         Err(_) => Default::default(),
     };
     let filter: Vec<String> = std::env::var("PAIRS")
         .map(|s| s.split(',').map(String::from).collect())
         .unwrap_or_default();
+    let mut cv = if std::env::var("OPENCV").as_deref() == Ok("0") {
+        Err("disabled (OPENCV=0)".to_string())
+    } else {
+        OpenCv::start(&dir)
+    };
     let dis = Dis::new(opts.clone());
     let mut names: Vec<_> = std::fs::read_dir(&dir)
         .unwrap()
@@ -85,38 +199,84 @@ fn main() {
         let gt = read_flo(&d.join("flow.flo"));
         let occ = image::open(d.join("occlusions.png")).unwrap().to_luma8();
         let noc: Vec<bool> = occ.as_raw().iter().map(|v| *v < 128).collect();
-        let mut times = Vec::new();
+        let mut ours = Vec::new();
+        let mut theirs = Vec::new();
         let mut est = None;
-        for _ in 0..reps {
-            let t = Instant::now();
-            est = Some(dis.compute(&a, &b).unwrap());
-            times.push(t.elapsed().as_secs_f64() * 1e3);
+        for rep in 0..reps {
+            let mut run_ours = || {
+                let (f, t) = dis.compute_timed(&a, &b).unwrap();
+                est = Some(f);
+                ours.push(t);
+            };
+            match (&mut cv, rep % 2) {
+                (Ok(cv), 0) => {
+                    run_ours();
+                    theirs.push(cv.run(&n));
+                }
+                (Ok(cv), _) => {
+                    theirs.push(cv.run(&n));
+                    run_ours();
+                }
+                (Err(_), _) => run_ours(),
+            }
         }
-        times.sort_by(|x, y| x.partial_cmp(y).unwrap());
         let est = est.unwrap();
         if let Ok(dump) = std::env::var("DUMP_DIR") {
             write_flo(&Path::new(&dump).join(format!("{n}.flo")), &est);
         }
-        let small = n.starts_with("alley") || n.starts_with("cave");
-        rows.push(serde_json::json!({
-            "pair": n, "small_motion": small,
+        let ms = median(ours.iter().map(|t| t.total_ms).collect());
+        let mut row = json!({
+            "pair": n, "small_motion": n.starts_with("alley") || n.starts_with("cave"),
+            "gt_mean_mag": gt.mean_magnitude(),
             "epe_all": epe(&est, &gt, None), "epe_noc": epe(&est, &gt, Some(&noc)),
-            "gt_mean_mag": gt.mean_magnitude(), "ms_median": times[times.len() / 2],
-        }));
+            "ms_median": ms, "stages_ms": stage_medians(&ours),
+        });
+        if let Some(last) = theirs.last() {
+            let cms = median(theirs.iter().map(|r| r["ms"].as_f64().unwrap()).collect());
+            row["opencv"] =
+                json!({"epe_all": last["epe_all"], "epe_noc": last["epe_noc"], "ms_median": cms});
+            row["ratio"] = json!(ms / cms);
+        }
+        eprintln!("{row}");
+        rows.push(row);
     }
-    let mean = |small: bool, k: &str| {
+    let mean = |small: bool, get: &dyn Fn(&Value) -> Option<f64>| {
         let v: Vec<f64> = rows
             .iter()
             .filter(|r| r["small_motion"] == small)
-            .map(|r| r[k].as_f64().unwrap())
+            .filter_map(get)
             .collect();
-        v.iter().sum::<f64>() / v.len().max(1) as f64
+        (!v.is_empty()).then(|| v.iter().sum::<f64>() / v.len() as f64)
     };
-    let out = serde_json::json!({
-        "method": "romo DIS", "options": opts, "threads": rayon::current_num_threads(),
-        "small": {"epe_all": mean(true, "epe_all"), "epe_noc": mean(true, "epe_noc"), "ms": mean(true, "ms_median")},
-        "large": {"epe_all": mean(false, "epe_all"), "epe_noc": mean(false, "epe_noc"), "ms": mean(false, "ms_median")},
+    let summary = |small: bool| {
+        let ours_ms = mean(small, &|r| r["ms_median"].as_f64());
+        let cv_ms = mean(small, &|r| r["opencv"]["ms_median"].as_f64());
+        let mut stages = serde_json::Map::new();
+        if let Some(first) = rows.iter().find(|r| r["small_motion"] == small) {
+            for k in first["stages_ms"].as_object().unwrap().keys() {
+                let v = mean(small, &|r| r["stages_ms"][k].as_f64());
+                stages.insert(k.clone(), json!(v));
+            }
+        }
+        json!({
+            "romo": {"epe_all": mean(small, &|r| r["epe_all"].as_f64()),
+                     "epe_noc": mean(small, &|r| r["epe_noc"].as_f64()), "ms": ours_ms},
+            "opencv": {"epe_all": mean(small, &|r| r["opencv"]["epe_all"].as_f64()),
+                       "epe_noc": mean(small, &|r| r["opencv"]["epe_noc"].as_f64()), "ms": cv_ms},
+            "ratio": ours_ms.zip(cv_ms).map(|(a, b)| a / b),
+            "romo_stages_ms": stages,
+        })
+    };
+    let out = json!({
+        "method": "romo DIS vs OpenCV DIS MEDIUM (interleaved, per-pair medians, means over pairs)",
+        "options": opts, "threads": rayon::current_num_threads(), "reps": reps,
+        "opencv": match &cv { Ok(c) => json!({"available": true, "version": c.version, "threads": 2}),
+                              Err(e) => json!({"available": false, "reason": e}) },
+        "small": summary(true), "large": summary(false),
         "pairs": rows,
     });
+    if let Ok(c) = cv {
+        c.stop();
+    }
     println!("{}", serde_json::to_string_pretty(&out).unwrap());
 }

@@ -31,6 +31,7 @@ use super::{Flow, FlowEstimator};
 use crate::plane::Plane;
 use rayon::prelude::*;
 use serde::{Deserialize, Serialize};
+use std::time::Instant;
 
 /// Patch sizes with a compiled kernel.
 pub const PATCH_SIZES: [usize; 6] = [4, 6, 8, 10, 12, 16];
@@ -127,6 +128,45 @@ impl DisOptions {
         }
         Ok(())
     }
+}
+
+/// Milliseconds since `t`.
+fn ms(t: Instant) -> f64 {
+    t.elapsed().as_secs_f64() * 1e3
+}
+
+/// Wall-clock time of one pyramid level's stages (ms).
+#[derive(Debug, Clone, Default, Serialize, Deserialize)]
+pub struct LevelTimings {
+    /// Pyramid level (0 = full resolution).
+    pub level: usize,
+    /// Level width (px).
+    pub w: usize,
+    /// Level height (px).
+    pub h: usize,
+    /// Upsampling the coarser level's flow.
+    pub upsample_ms: f64,
+    /// Gradients, padding, per-patch Hessians, initial flows.
+    pub prepare_ms: f64,
+    /// Patch inverse search (propagation + Gauss–Newton).
+    pub search_ms: f64,
+    /// Densification of the patch flows.
+    pub densify_ms: f64,
+    /// Variational refinement.
+    pub variational_ms: f64,
+}
+
+/// Where one [`Dis::compute_timed`] call spent its time (ms).
+#[derive(Debug, Clone, Default, Serialize, Deserialize)]
+pub struct DisTimings {
+    /// Building the image pyramids.
+    pub pyramid_ms: f64,
+    /// Per level, coarse to fine.
+    pub levels: Vec<LevelTimings>,
+    /// Resizing the finest computed flow to the input resolution.
+    pub final_resize_ms: f64,
+    /// Whole call.
+    pub total_ms: f64,
 }
 
 /// The built-in flow backend.
@@ -401,6 +441,11 @@ fn stripe<const P: usize>(ctx: &StripeCtx, first_row: usize, s: &mut [Cand]) {
 struct Level<'a> {
     i0: &'a Plane,
     i1: &'a Plane,
+    /// Gradients of `i0`.
+    i0x: Plane,
+    i0y: Plane,
+    /// Run row loops in parallel (large enough level).
+    par: bool,
     /// Run the exhaustive search here.
     search: bool,
 }
@@ -411,28 +456,40 @@ impl Dis {
         Self { opts }
     }
 
-    fn level(&self, lv: &Level, init: Flow) -> Flow {
+    fn level(&self, lv: &Level, init: Flow, t: &mut LevelTimings) -> Flow {
         let mut out = match self.opts.patch_size {
-            4 => self.patches::<4>(lv, init),
-            6 => self.patches::<6>(lv, init),
-            10 => self.patches::<10>(lv, init),
-            12 => self.patches::<12>(lv, init),
-            16 => self.patches::<16>(lv, init),
-            _ => self.patches::<8>(lv, init),
+            4 => self.patches::<4>(lv, init, t),
+            6 => self.patches::<6>(lv, init, t),
+            10 => self.patches::<10>(lv, init, t),
+            12 => self.patches::<12>(lv, init, t),
+            16 => self.patches::<16>(lv, init, t),
+            _ => self.patches::<8>(lv, init, t),
         };
-        variational::refine(lv.i0, lv.i1, &mut out, &self.opts.variational);
+        let c = Instant::now();
+        let (i1x, i1y) = variational::gradients(lv.i1, lv.par);
+        let im = variational::Images {
+            i0: lv.i0,
+            i1: lv.i1,
+            i0x: &lv.i0x,
+            i0y: &lv.i0y,
+            i1x: &i1x,
+            i1y: &i1y,
+        };
+        variational::refine(&im, &mut out, &self.opts.variational);
+        t.variational_ms = ms(c);
         out
     }
 
     /// Patch search and densification at one level.
-    fn patches<const P: usize>(&self, lv: &Level, init: Flow) -> Flow {
+    fn patches<const P: usize>(&self, lv: &Level, init: Flow, t: &mut LevelTimings) -> Flow {
+        let c = Instant::now();
         let o = &self.opts;
         let (i0, i1) = (lv.i0, lv.i1);
         let (w, h) = (i0.w, i0.h);
         if w < P || h < P {
             return init;
         }
-        let (gx, gy) = i0.gradients();
+        let (gx, gy) = (&lv.i0x, &lv.i0y);
         let b = P + 2;
         let i1p = pad(i1, b);
         let img = Img {
@@ -471,9 +528,13 @@ impl Dis {
             step: o.descent_step,
             search_radius: if lv.search { o.coarse_search_radius } else { 0 },
         };
+        t.prepare_ms = ms(c);
+        let c = Instant::now();
         s.par_chunks_mut(stripe_rows * nx)
             .enumerate()
             .for_each(|(si, chunk)| stripe::<P>(&ctx, si * stripe_rows, chunk));
+        t.search_ms = ms(c);
+        let c = Instant::now();
         // Densification, row-parallel.
         let mut out = Flow::zeros(w, h);
         out.u
@@ -522,11 +583,19 @@ impl Dis {
                     }
                 }
             });
+        t.densify_ms = ms(c);
         out
     }
 
     /// Flow between two grayscale planes in [0, 1].
     pub fn compute(&self, i0: &Plane, i1: &Plane) -> crate::Result<Flow> {
+        Ok(self.compute_timed(i0, i1)?.0)
+    }
+
+    /// [`Dis::compute`] that also reports where the time went.
+    pub fn compute_timed(&self, i0: &Plane, i1: &Plane) -> crate::Result<(Flow, DisTimings)> {
+        let start = Instant::now();
+        let mut times = DisTimings::default();
         self.opts.validate()?;
         if i0.w != i1.w || i0.h != i1.h || i0.w < 2 || i0.h < 2 {
             return Err(crate::RomoError::Input(format!(
@@ -548,25 +617,43 @@ impl Dis {
             p0.push(a);
             p1.push(b);
         }
+        times.pyramid_ms = ms(start);
         let coarsest = p0.len() - 1;
         let finest = self.opts.finest_scale.min(coarsest);
         let mut flow = Flow::zeros(p0[coarsest].w, p0[coarsest].h);
         for l in (finest..=coarsest).rev() {
             let (a, b) = (&p0[l], &p1[l]);
+            let mut lt = LevelTimings {
+                level: l,
+                w: a.w,
+                h: a.h,
+                ..Default::default()
+            };
+            let c = Instant::now();
             if flow.w() != a.w || flow.h() != a.h {
                 flow = flow.resize(a.w, a.h);
             }
+            lt.upsample_ms = ms(c);
+            let par = a.w * a.h >= variational::PAR_MIN_PIXELS;
+            let (i0x, i0y) = variational::gradients(a, par);
             let lv = Level {
                 i0: a,
                 i1: b,
+                i0x,
+                i0y,
+                par,
                 search: l + self.opts.search_levels > coarsest,
             };
-            flow = self.level(&lv, flow);
+            flow = self.level(&lv, flow, &mut lt);
+            times.levels.push(lt);
         }
+        let c = Instant::now();
         if flow.w() != i0.w || flow.h() != i0.h {
             flow = flow.resize(i0.w, i0.h);
         }
-        Ok(flow)
+        times.final_resize_ms = ms(c);
+        times.total_ms = ms(start);
+        Ok((flow, times))
     }
 }
 
