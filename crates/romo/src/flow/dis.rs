@@ -26,6 +26,7 @@
 //! patch positions are clamped so a patch overlaps the image by at least
 //! one pixel (as OpenCV does); the hot loops then need no bounds handling.
 
+use super::pyramid;
 use super::variational::{self, VariationalOptions};
 use super::{Flow, FlowEstimator};
 use crate::plane::Plane;
@@ -144,7 +145,7 @@ pub struct LevelTimings {
     pub w: usize,
     /// Level height (px).
     pub h: usize,
-    /// Upsampling the coarser level's flow.
+    /// Upsampling the coarser level's flow and the first image's gradients.
     pub upsample_ms: f64,
     /// Gradients, padding, per-patch Hessians, initial flows.
     pub prepare_ms: f64,
@@ -189,10 +190,10 @@ fn grid(len: usize, ps: usize, stride: usize) -> Vec<usize> {
 }
 
 /// Replicate-pad a plane by `b` pixels on every side.
-fn pad(p: &Plane, b: usize) -> Vec<f32> {
+fn pad(p: &Plane, b: usize, par: bool) -> Vec<f32> {
     let wp = p.w + 2 * b;
     let mut out = vec![0.0f32; wp * (p.h + 2 * b)];
-    out.par_chunks_mut(wp).enumerate().for_each(|(yp, row)| {
+    pyramid::rows_mut(par, &mut out, wp, |yp, row| {
         let y = yp.saturating_sub(b).min(p.h - 1);
         let src = &p.data[y * p.w..(y + 1) * p.w];
         row[..b].fill(src[0]);
@@ -225,8 +226,11 @@ struct Patch {
     sgy: f32,
 }
 
-/// A displacement with its patch distance.
+/// A displacement.
 type Cand = (f32, f32);
+
+/// Kernel sums `[Σd, Σd², Σ gx·d, Σ gy·d]` of a patch at a displacement.
+type Sums = [f32; 4];
 
 impl Img<'_> {
     /// Offset into the padded second image of the (clamped) patch origin
@@ -322,21 +326,33 @@ impl Img<'_> {
         }
     }
 
-    /// Inverse-compositional Gauss–Newton from `start` with early stopping
-    /// when the distance stops decreasing; a result farther than `P` from
-    /// the start is rejected.
+    /// Inverse-compositional Gauss–Newton from `start` (whose kernel sums
+    /// `start_sums` are known) with early stopping when the distance stops
+    /// decreasing; a result farther than `P` from the start is rejected.
+    /// Returns the result and, when they were computed, its kernel sums.
     #[inline(always)]
-    fn align<const P: usize>(&self, p: &Patch, start: Cand, iters: usize, step: f32) -> Cand {
+    fn align<const P: usize>(
+        &self,
+        p: &Patch,
+        start: Cand,
+        start_sums: Sums,
+        iters: usize,
+        step: f32,
+    ) -> (Cand, Option<Sums>) {
         let n = (P * P) as f32;
         let mut cur = start;
-        let mut best = (start, f32::INFINITY);
+        let mut sums = start_sums;
+        let mut best = (start, f32::INFINITY, start_sums);
         let mut prev = f32::INFINITY;
         let mut stopped = false;
-        for _ in 0..iters {
-            let [s1, s2, bx, by] = self.kernel::<P>(p, cur.0, cur.1);
+        for it in 0..iters {
+            if it > 0 {
+                sums = self.kernel::<P>(p, cur.0, cur.1);
+            }
+            let [s1, s2, bx, by] = sums;
             let ssd = s2 - s1 * s1 / n;
             if ssd < best.1 {
-                best = (cur, ssd);
+                best = (cur, ssd, sums);
             }
             if ssd >= prev {
                 stopped = true;
@@ -348,14 +364,18 @@ impl Img<'_> {
             cur.0 -= p.hinv[0] * bx + p.hinv[1] * by;
             cur.1 -= p.hinv[1] * bx + p.hinv[2] * by;
         }
-        let res = if stopped { best.0 } else { cur };
-        if res.0.is_finite()
-            && res.1.is_finite()
-            && (res.0 - start.0).hypot(res.1 - start.1) <= P as f32
+        let res = if stopped {
+            (best.0, Some(best.2))
+        } else {
+            (cur, None)
+        };
+        if res.0.0.is_finite()
+            && res.0.1.is_finite()
+            && (res.0.0 - start.0).hypot(res.0.1 - start.1) <= P as f32
         {
             res
         } else {
-            start
+            (start, Some(start_sums))
         }
     }
 
@@ -399,6 +419,10 @@ fn stripe<const P: usize>(ctx: &StripeCtx, first_row: usize, s: &mut [Cand]) {
         }
     }
     let per_pass = (ctx.iters / 2).max(1);
+    let n = (P * P) as f32;
+    let cost = |m: &Sums| m[1] - m[0] * m[0] / n;
+    // Kernel sums at each patch's current flow, when known.
+    let mut known: Vec<Option<Sums>> = vec![None; s.len()];
     for pass in 0..2 {
         for ri in 0..rows {
             for ci in 0..nx {
@@ -409,29 +433,34 @@ fn stripe<const P: usize>(ctx: &StripeCtx, first_row: usize, s: &mut [Cand]) {
                 };
                 let k = r * nx + c;
                 let p = pat(k);
-                let mut best = (img.cost::<P>(p, s[k]), s[k]);
-                let try_cand = |j: usize, best: &mut (f32, Cand)| {
-                    let cost = img.cost::<P>(p, s[j]);
-                    if cost < best.0 {
-                        *best = (cost, s[j]);
+                let own = known[k].unwrap_or_else(|| img.kernel::<P>(p, s[k].0, s[k].1));
+                let mut best = (cost(&own), s[k], own);
+                let mut try_cand = |j: usize| {
+                    // Equal flows have equal costs: skip the evaluation.
+                    if s[j] != best.1 {
+                        let m = img.kernel::<P>(p, s[j].0, s[j].1);
+                        let cj = cost(&m);
+                        if cj < best.0 {
+                            best = (cj, s[j], m);
+                        }
                     }
                 };
                 if pass == 0 {
                     if c > 0 {
-                        try_cand(k - 1, &mut best);
+                        try_cand(k - 1);
                     }
                     if r > 0 {
-                        try_cand(k - nx, &mut best);
+                        try_cand(k - nx);
                     }
                 } else {
                     if c + 1 < nx {
-                        try_cand(k + 1, &mut best);
+                        try_cand(k + 1);
                     }
                     if r + 1 < rows {
-                        try_cand(k + nx, &mut best);
+                        try_cand(k + nx);
                     }
                 }
-                s[k] = img.align::<P>(p, best.1, per_pass, ctx.step);
+                (s[k], known[k]) = img.align::<P>(p, best.1, best.2, per_pass, ctx.step);
             }
         }
     }
@@ -491,7 +520,8 @@ impl Dis {
         }
         let (gx, gy) = (&lv.i0x, &lv.i0y);
         let b = P + 2;
-        let i1p = pad(i1, b);
+        let par = lv.par;
+        let i1p = pad(i1, b, par);
         let img = Img {
             i0: &i0.data,
             gx: &gx.data,
@@ -505,10 +535,12 @@ impl Dis {
         let xs = grid(w, P, o.patch_stride);
         let ys = grid(h, P, o.patch_stride);
         let (nx, ny) = (xs.len(), ys.len());
-        let patches: Vec<Patch> = (0..nx * ny)
-            .into_par_iter()
-            .map(|k| img.patch::<P>(xs[k % nx], ys[k / nx]))
-            .collect();
+        let make = |k: usize| img.patch::<P>(xs[k % nx], ys[k / nx]);
+        let patches: Vec<Patch> = if par {
+            (0..nx * ny).into_par_iter().map(make).collect()
+        } else {
+            (0..nx * ny).map(make).collect()
+        };
         let half = P / 2;
         let mut s: Vec<Cand> = patches
             .iter()
@@ -530,59 +562,55 @@ impl Dis {
         };
         t.prepare_ms = ms(c);
         let c = Instant::now();
-        s.par_chunks_mut(stripe_rows * nx)
-            .enumerate()
-            .for_each(|(si, chunk)| stripe::<P>(&ctx, si * stripe_rows, chunk));
+        let run = |(si, chunk): (usize, &mut [Cand])| stripe::<P>(&ctx, si * stripe_rows, chunk);
+        if par {
+            s.par_chunks_mut(stripe_rows * nx).enumerate().for_each(run);
+        } else {
+            s.chunks_mut(stripe_rows * nx).enumerate().for_each(run);
+        }
         t.search_ms = ms(c);
         let c = Instant::now();
         // Densification, row-parallel.
         let mut out = Flow::zeros(w, h);
-        out.u
-            .data
-            .par_chunks_mut(w)
-            .zip(out.v.data.par_chunks_mut(w))
-            .enumerate()
-            .for_each(|(y, (ru, rv))| {
-                let mut sw = vec![0.0f32; w];
-                let row0 = &img.i0[y * w..(y + 1) * w];
-                for (py, &y0) in ys.iter().enumerate() {
-                    if y < y0 || y >= y0 + P {
-                        continue;
-                    }
-                    let r = y - y0;
-                    for (px, &x0) in xs.iter().enumerate() {
-                        let (u, v) = s[py * nx + px];
-                        let (o1, wt) = img.locate::<P>(x0, y0, u, v);
-                        let t0 = &img.i1p[o1 + r * img.wp..][..P + 1];
-                        let t1 = &img.i1p[o1 + (r + 1) * img.wp..][..P + 1];
-                        let a = &row0[x0..x0 + P];
-                        let (ru, rv, sw) = (
-                            &mut ru[x0..x0 + P],
-                            &mut rv[x0..x0 + P],
-                            &mut sw[x0..x0 + P],
-                        );
-                        for j in 0..P {
-                            let warped = wt[0] * t0[j]
-                                + wt[1] * t0[j + 1]
-                                + wt[2] * t1[j]
-                                + wt[3] * t1[j + 1];
-                            let c = 1.0 / (warped - a[j]).abs().max(1.0);
-                            ru[j] += c * u;
-                            rv[j] += c * v;
-                            sw[j] += c;
-                        }
+        pyramid::rows2_mut(par, &mut out.u.data, w, &mut out.v.data, w, |y, ru, rv| {
+            let mut sw = vec![0.0f32; w];
+            let row0 = &img.i0[y * w..(y + 1) * w];
+            for (py, &y0) in ys.iter().enumerate() {
+                if y < y0 || y >= y0 + P {
+                    continue;
+                }
+                let r = y - y0;
+                for (px, &x0) in xs.iter().enumerate() {
+                    let (u, v) = s[py * nx + px];
+                    let (o1, wt) = img.locate::<P>(x0, y0, u, v);
+                    let t0 = &img.i1p[o1 + r * img.wp..][..P + 1];
+                    let t1 = &img.i1p[o1 + (r + 1) * img.wp..][..P + 1];
+                    let a = &row0[x0..x0 + P];
+                    let (ru, rv, sw) = (
+                        &mut ru[x0..x0 + P],
+                        &mut rv[x0..x0 + P],
+                        &mut sw[x0..x0 + P],
+                    );
+                    for j in 0..P {
+                        let warped =
+                            wt[0] * t0[j] + wt[1] * t0[j + 1] + wt[2] * t1[j] + wt[3] * t1[j + 1];
+                        let c = 1.0 / (warped - a[j]).abs().max(1.0);
+                        ru[j] += c * u;
+                        rv[j] += c * v;
+                        sw[j] += c;
                     }
                 }
-                for x in 0..w {
-                    if sw[x] > 0.0 {
-                        ru[x] /= sw[x];
-                        rv[x] /= sw[x];
-                    } else {
-                        ru[x] = init.u.data[y * w + x];
-                        rv[x] = init.v.data[y * w + x];
-                    }
+            }
+            for x in 0..w {
+                if sw[x] > 0.0 {
+                    ru[x] /= sw[x];
+                    rv[x] /= sw[x];
+                } else {
+                    ru[x] = init.u.data[y * w + x];
+                    rv[x] = init.v.data[y * w + x];
                 }
-            });
+            }
+        });
         t.densify_ms = ms(c);
         out
     }
@@ -594,6 +622,13 @@ impl Dis {
 
     /// [`Dis::compute`] that also reports where the time went.
     pub fn compute_timed(&self, i0: &Plane, i1: &Plane) -> crate::Result<(Flow, DisTimings)> {
+        // Run on a rayon worker: the many short parallel loops inside then
+        // fork from within the pool instead of each injecting a job from
+        // outside and blocking (two context switches per loop).
+        rayon::scope(|_| self.compute_in_pool(i0, i1))
+    }
+
+    fn compute_in_pool(&self, i0: &Plane, i1: &Plane) -> crate::Result<(Flow, DisTimings)> {
         let start = Instant::now();
         let mut times = DisTimings::default();
         self.opts.validate()?;
@@ -603,26 +638,39 @@ impl Dis {
                 i0.w, i0.h, i1.w, i1.h
             )));
         }
-        let scale = |p: &Plane| p.map(|v| v * 255.0);
-        let mut p0 = vec![scale(i0)];
-        let mut p1 = vec![scale(i1)];
+        // Level sizes (as `Plane::half`: rounded up) down to the coarsest.
+        let mut sizes = vec![(i0.w, i0.h)];
         loop {
-            let last = &p0[p0.len() - 1];
-            if last.w / 2 < self.opts.coarsest_width.max(self.opts.patch_size)
-                || last.h / 2 < self.opts.patch_size
+            let (w, h) = sizes[sizes.len() - 1];
+            if w / 2 < self.opts.coarsest_width.max(self.opts.patch_size)
+                || h / 2 < self.opts.patch_size
             {
                 break;
             }
-            let (a, b) = (last.half(), p1[p1.len() - 1].half());
-            p0.push(a);
-            p1.push(b);
+            sizes.push((w.div_ceil(2), h.div_ceil(2)));
         }
-        times.pyramid_ms = ms(start);
-        let coarsest = p0.len() - 1;
+        let coarsest = sizes.len() - 1;
         let finest = self.opts.finest_scale.min(coarsest);
-        let mut flow = Flow::zeros(p0[coarsest].w, p0[coarsest].h);
+        // Images in 0–255, from level `finest` (finer levels are not
+        // built; level 1 comes straight from the input).
+        let build = |p: &Plane| {
+            let mut v = vec![if finest == 0 {
+                pyramid::scaled(p, 255.0)
+            } else {
+                pyramid::half(p, 255.0)
+            }];
+            for _ in finest.max(1) + 1..=coarsest {
+                let next = pyramid::half(&v[v.len() - 1], 1.0);
+                v.push(next);
+            }
+            v
+        };
+        let (p0, p1) = rayon::join(|| build(i0), || build(i1));
+        let at = |l: usize| (&p0[l - finest], &p1[l - finest]);
+        times.pyramid_ms = ms(start);
+        let mut flow = Flow::zeros(at(coarsest).0.w, at(coarsest).0.h);
         for l in (finest..=coarsest).rev() {
-            let (a, b) = (&p0[l], &p1[l]);
+            let (a, b) = at(l);
             let mut lt = LevelTimings {
                 level: l,
                 w: a.w,
@@ -630,12 +678,10 @@ impl Dis {
                 ..Default::default()
             };
             let c = Instant::now();
-            if flow.w() != a.w || flow.h() != a.h {
-                flow = flow.resize(a.w, a.h);
-            }
-            lt.upsample_ms = ms(c);
-            let par = a.w * a.h >= variational::PAR_MIN_PIXELS;
+            flow = pyramid::resize_flow(&flow, a.w, a.h);
+            let par = a.w * a.h >= pyramid::PAR_MIN_PIXELS;
             let (i0x, i0y) = variational::gradients(a, par);
+            lt.upsample_ms = ms(c);
             let lv = Level {
                 i0: a,
                 i1: b,
@@ -648,9 +694,7 @@ impl Dis {
             times.levels.push(lt);
         }
         let c = Instant::now();
-        if flow.w() != i0.w || flow.h() != i0.h {
-            flow = flow.resize(i0.w, i0.h);
-        }
+        flow = pyramid::resize_flow(&flow, i0.w, i0.h);
         times.final_resize_ms = ms(c);
         times.total_ms = ms(start);
         Ok((flow, times))

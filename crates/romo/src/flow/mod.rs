@@ -6,6 +6,7 @@
 //! paper's RAFT can be plugged in through ONNX (feature `onnx`).
 
 pub mod dis;
+pub mod pyramid;
 pub mod variational;
 
 use crate::plane::Plane;

@@ -18,12 +18,12 @@
 //! pad row above and below), field-major within a row (structure of
 //! arrays), so a colour can be updated in place, row-parallel, while the
 //! other is only read, and the inner loops vectorise. Levels smaller than
-//! [`PAR_MIN_PIXELS`] run on the calling thread (fork–join costs more than
+//! [`PAR_MIN_PIXELS`](super::pyramid::PAR_MIN_PIXELS) run on the calling thread (fork–join costs more than
 //! the work there). Images are expected in 0–255 units.
 
 use super::Flow;
+use super::pyramid::{PAR_MIN_PIXELS, rows_mut, rows2_mut};
 use crate::plane::Plane;
-use rayon::prelude::*;
 use serde::{Deserialize, Serialize};
 
 /// Weights of the variational refinement. Defaults are DIS's (OpenCV's
@@ -61,44 +61,6 @@ impl Default for VariationalOptions {
             epsilon: 0.001,
             zeta_sq: 0.1,
         }
-    }
-}
-
-/// Levels with fewer pixels run single-threaded.
-pub const PAR_MIN_PIXELS: usize = 20_000;
-
-/// Run `f(row_index, row)` over the `chunk`-sized rows of `data`, in
-/// parallel when `par`.
-fn rows_mut<F>(par: bool, data: &mut [f32], chunk: usize, f: F)
-where
-    F: Fn(usize, &mut [f32]) + Sync + Send,
-{
-    if par {
-        data.par_chunks_mut(chunk)
-            .enumerate()
-            .for_each(|(i, r)| f(i, r));
-    } else {
-        data.chunks_mut(chunk)
-            .enumerate()
-            .for_each(|(i, r)| f(i, r));
-    }
-}
-
-/// As [`rows_mut`] over two arrays with the same row count.
-fn rows2_mut<F>(par: bool, a: &mut [f32], ca: usize, b: &mut [f32], cb: usize, f: F)
-where
-    F: Fn(usize, &mut [f32], &mut [f32]) + Sync + Send,
-{
-    if par {
-        a.par_chunks_mut(ca)
-            .zip(b.par_chunks_mut(cb))
-            .enumerate()
-            .for_each(|(i, (x, y))| f(i, x, y));
-    } else {
-        a.chunks_mut(ca)
-            .zip(b.chunks_mut(cb))
-            .enumerate()
-            .for_each(|(i, (x, y))| f(i, x, y));
     }
 }
 
