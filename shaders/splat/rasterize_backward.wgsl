@@ -166,6 +166,8 @@ fn rasterize_backward_main(@builtin(workgroup_id) wid: vec3<u32>, @builtin(local
         wg_last = atomicLoad(&wg_max_last);
     }
     let max_last = workgroupUniformLoad(&wg_last);
+    // Every invocation is active here: pick each subgroup's atomic issuer once.
+    let leader = grad_leader(lid);
     // Batches from the back: [batch_lo, batch_hi).
     var batch_hi = min(end, start + max_last);
     loop {
@@ -222,15 +224,15 @@ fn rasterize_backward_main(@builtin(workgroup_id) wid: vec3<u32>, @builtin(local
             }
             if (grad_any(acc.touched)) {
                 let base = 12u * s_id[j];
-                grad_acc(base + 0u, acc.mean.x, lid);
-                grad_acc(base + 1u, acc.mean.y, lid);
-                grad_acc(base + 4u, acc.conic.x, lid);
-                grad_acc(base + 5u, acc.conic.y, lid);
-                grad_acc(base + 6u, acc.conic.z, lid);
-                grad_acc(base + 7u, acc.op, lid);
-                grad_acc(base + 8u, acc.col.x, lid);
-                grad_acc(base + 9u, acc.col.y, lid);
-                grad_acc(base + 10u, acc.col.z, lid);
+                grad_acc(base + 0u, acc.mean.x, leader);
+                grad_acc(base + 1u, acc.mean.y, leader);
+                grad_acc(base + 4u, acc.conic.x, leader);
+                grad_acc(base + 5u, acc.conic.y, leader);
+                grad_acc(base + 6u, acc.conic.z, leader);
+                grad_acc(base + 7u, acc.op, leader);
+                grad_acc(base + 8u, acc.col.x, leader);
+                grad_acc(base + 9u, acc.col.y, leader);
+                grad_acc(base + 10u, acc.col.z, leader);
             }
         }
         batch_hi = batch_lo;

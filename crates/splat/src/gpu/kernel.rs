@@ -66,19 +66,23 @@ fn grad_add(i: u32, v: f32) {\n\
 }\n";
 
 /// Subgroup-reduced gradient accumulation: `grad_acc` sums `v` over the
-/// subgroup (8 lanes on llvmpipe) and one lane issues the atomic, so a splat
-/// costs one atomic per subgroup instead of one per invocation (atomics are
-/// scalarised, CAS-looped per lane on CPU drivers). Both functions must be
-/// called in subgroup-uniform control flow with a subgroup-uniform `i`;
-/// `lane` is any per-invocation unique id (the first active lane issues).
+/// subgroup (8 lanes on llvmpipe) and only the subgroup's leader issues the
+/// atomic, so a splat costs one atomic per subgroup instead of one per
+/// invocation (atomics are scalarised, CAS-looped per lane on CPU drivers).
+/// `grad_leader(lane)` picks the leader once, at the kernel's start, with
+/// every invocation active (`lane` any per-invocation unique id);
+/// `grad_any` / `grad_acc` must be called in subgroup-uniform control flow
+/// with a subgroup-uniform `i`.
 pub const GRAD_SUBGROUP_WGSL: &str = "fn grad_any(b: bool) -> bool { return subgroupAny(b); }\n\
-fn grad_acc(i: u32, v: f32, lane: u32) {\n\
+fn grad_leader(lane: u32) -> bool { return lane == subgroupBroadcastFirst(lane); }\n\
+fn grad_acc(i: u32, v: f32, leader: bool) {\n\
     let s = subgroupAdd(v);\n\
-    if (lane == subgroupBroadcastFirst(lane)) { grad_add(i, s); }\n\
+    if (leader) { grad_add(i, s); }\n\
 }\n";
 /// Without subgroups every invocation issues its own atomics.
 pub const GRAD_PLAIN_WGSL: &str = "fn grad_any(b: bool) -> bool { return b; }\n\
-fn grad_acc(i: u32, v: f32, lane: u32) { grad_add(i, v); }\n";
+fn grad_leader(lane: u32) -> bool { return true; }\n\
+fn grad_acc(i: u32, v: f32, leader: bool) { grad_add(i, v); }\n";
 
 /// The full WGSL module text for a kernel, atomics variant and subgroup
 /// variant (`subgroups` only matters for kernels with gradient atomics).
