@@ -25,6 +25,23 @@ struct AdamUniforms {
 @group(0) @binding(3) var<storage, read_write> exp_avg: array<f32>;
 @group(0) @binding(4) var<storage, read_write> exp_avg_sq: array<f32>;
 
+// k mod d without an integer division (CPU drivers scalarise vector
+// divisions): a float quotient estimate, off by at most (k/d)·2⁻²² + 1,
+// then exact correction in wrapping u32 — exact while the quotient k/d (the
+// splat index) is below 12 million.
+fn rem(k: u32, d: u32) -> u32 {
+    let q = u32(f32(k) / f32(d));
+    var r = k - q * d;
+    for (var c = 0u; c < 4u; c++) {
+        if (r >= 0x80000000u) {
+            r += d;
+        } else if (r >= d) {
+            r -= d;
+        }
+    }
+    return r;
+}
+
 @compute @workgroup_size(256)
 fn adam_main(@builtin(workgroup_id) wid: vec3<u32>, @builtin(num_workgroups) nwg: vec3<u32>,
              @builtin(local_invocation_index) lid: u32) {
@@ -41,7 +58,7 @@ fn adam_main(@builtin(workgroup_id) wid: vec3<u32>, @builtin(num_workgroups) nwg
     exp_avg[k] = m;
     exp_avg_sq[k] = v;
     var lr = u.lr;
-    if (u.stride > 0u && (k % u.stride) < u.head) {
+    if (u.stride > 0u && rem(k, u.stride) < u.head) {
         lr = u.lr_head;
     }
     params[k] = params[k] - lr / u.bc1 * m / (sqrt(v) / u.sbc2 + u.eps);

@@ -48,13 +48,13 @@ fn project_backward_main(@builtin(workgroup_id) wid: vec3<u32>, @builtin(num_wor
     let v_opacity = v_proj[vb + 7u];
     let v_color = vec3<f32>(v_proj[vb + 8u], v_proj[vb + 9u], v_proj[vb + 10u]);
     mean2d_abs[i] = sqrt(v_mean2d.x * v_mean2d.x + v_mean2d.y * v_mean2d.y);
-    write_zero(i);
 
     let m = vec3<f32>(means[3u * i], means[3u * i + 1u], means[3u * i + 2u]);
     let ls = vec3<f32>(log_scales[3u * i], log_scales[3u * i + 1u], log_scales[3u * i + 2u]);
     let q = vec4<f32>(rotations[4u * i], rotations[4u * i + 1u], rotations[4u * i + 2u], rotations[4u * i + 3u]);
     let it = project_geometry(m, ls, q, opacity_logits[i], cam);
     if (!it.ok) {
+        write_zero(i);
         return;
     }
     // Colour → SH and view direction.
@@ -73,7 +73,8 @@ fn project_backward_main(@builtin(workgroup_id) wid: vec3<u32>, @builtin(num_wor
     let col = raw + vec3<f32>(0.5);
     let col_out = vec3<f32>(max0(col.x), max0(col.y), max0(col.z));
     if (!all_finite3(col_out)) {
-        return; // culled in the forward as well
+        write_zero(i); // culled in the forward as well
+        return;
     }
     var vc = v_color;
     if (col.x < 0.0) { vc.x = 0.0; }
@@ -89,6 +90,10 @@ fn project_backward_main(@builtin(workgroup_id) wid: vec3<u32>, @builtin(num_wor
         g_sh[o + 2u] = basis[k] * vc.z;
         let w = shk * vc;
         v_dir += (w.x + w.y + w.z) * bgrad[k];
+    }
+    // Stored coefficients above the active degree get no gradient.
+    for (var o = base + 3u * ncoef; o < base + cam.sh_stored * 3u; o++) {
+        g_sh[o] = 0.0;
     }
     var g_mean = vec3<f32>(0.0);
     if (dist > 0.0) {
