@@ -83,13 +83,21 @@ pub trait FeatureExtractor: Send + Sync {
     fn extract(&self, frame: &Rgb, w: usize, h: usize) -> crate::Result<FeatureMap>;
 }
 
-/// The built-in descriptor, 14 channels at the working grid:
+/// The built-in descriptor, 14 (16) channels at the working grid:
 /// RGB (3), RGB Gaussian-smoothed with σ = 2 and σ = 6 grid px (6),
 /// gradient magnitude of luma at the grid and at twice its resolution (2),
 /// local standard deviation of luma in a 5 × 5 window (1), and normalised
 /// position x/w, y/h (2).
+///
+/// With `chromaticity` (the pipeline's default) two more channels, 16 in
+/// all, placed before the position: r/(r+g+b) and g/(r+g+b) smoothed with
+/// σ = 1 grid px (colour independent of shading; see README for the DAVIS
+/// measurement).
 #[derive(Debug, Clone, Default)]
-pub struct HandFeatures;
+pub struct HandFeatures {
+    /// Add the two chromaticity channels.
+    pub chromaticity: bool,
+}
 
 impl FeatureExtractor for HandFeatures {
     fn name(&self) -> &str {
@@ -114,6 +122,14 @@ impl FeatureExtractor for HandFeatures {
         let mean = gray.box_mean(2);
         let sq = gray.map(|v| v * v).box_mean(2);
         planes.push(sq.zip(&mean, |s, m| (s - m * m).max(0.0).sqrt()));
+        if self.chromaticity {
+            // Shading-invariant colour: r/(r+g+b), g/(r+g+b), smoothed σ = 1.
+            let sum = small.c[0]
+                .zip(&small.c[1], |a, b| a + b)
+                .zip(&small.c[2], |a, b| a + b + 1e-3);
+            planes.push(small.c[0].zip(&sum, |a, s| a / s).gaussian(1.0));
+            planes.push(small.c[1].zip(&sum, |a, s| a / s).gaussian(1.0));
+        }
         planes.push(Plane::from_fn(w, h, |x, _| (x as f32 + 0.5) / w as f32));
         planes.push(Plane::from_fn(w, h, |_, y| (y as f32 + 0.5) / h as f32));
         Ok(FeatureMap {
@@ -166,7 +182,7 @@ mod tests {
                 Plane::filled(40, 30, 0.5),
             ],
         };
-        let f = HandFeatures.extract(&img, 20, 15).unwrap();
+        let f = HandFeatures::default().extract(&img, 20, 15).unwrap();
         assert_eq!((f.c, f.w, f.h), (14, 20, 15));
         let mut v = vec![f.clone(), f];
         standardise(&mut v);

@@ -59,6 +59,14 @@ pub struct LabelOptions {
     /// is static parallax (parkour, breakdance). 0 disables. Default: see
     /// README.
     pub f_informative_fraction: f32,
+    /// U propagation along the flow (ours): U is spread this many frames
+    /// forward and backward along cycle-consistent flow (a pixel becomes U
+    /// when its correspondent in the neighbouring frame is U) and removed
+    /// from L there. Objects whose motion is visible to the epipolar test
+    /// only in some frames (the demo's pedestrians walking along epipolar
+    /// lines) then keep U, and lose the wrong L, in the frames between.
+    /// 0 disables. Default: see README.
+    pub u_propagation_frames: usize,
     /// Robust estimation and model selection.
     pub robust: RobustOptions,
 }
@@ -73,6 +81,7 @@ impl Default for LabelOptions {
             min_inlier_ratio: 0.5,
             fit_points: 2000,
             f_informative_fraction: 0.005,
+            u_propagation_frames: 0,
             robust: RobustOptions::default(),
         }
     }
@@ -265,11 +274,104 @@ pub fn frame_labels(sides: &[Side], o: &LabelOptions) -> FrameLabels {
     }
 }
 
+/// Spread U along the flow `passes` times (see
+/// [`LabelOptions::u_propagation_frames`]): frame t gains U where
+/// `fwd[t]` (t → t+1) lands in U of frame t+1 or `bwd[t−1]` (t → t−1) lands
+/// in U of frame t−1, both only where the flow passed the cycle check; L
+/// and the coverage fractions are updated.
+pub fn propagate_u(
+    labels: &mut [FrameLabels],
+    fwd: &[Flow],
+    bwd: &[Flow],
+    valid_f: &[Vec<bool>],
+    valid_b: &[Vec<bool>],
+    passes: usize,
+) {
+    let n = labels.len();
+    if n < 2 || fwd.len() + 1 != n || bwd.len() + 1 != n {
+        return;
+    }
+    let (w, h) = (fwd[0].w(), fwd[0].h());
+    let hit = |u: &[bool], f: &Flow, i: usize| {
+        let x = ((i % w) as f32 + f.u.data[i]).round();
+        let y = ((i / w) as f32 + f.v.data[i]).round();
+        x >= 0.0
+            && y >= 0.0
+            && (x as usize) < w
+            && (y as usize) < h
+            && u[y as usize * w + x as usize]
+    };
+    for _ in 0..passes {
+        let us: Vec<Vec<bool>> = labels.iter().map(|l| l.u.clone()).collect();
+        labels.par_iter_mut().enumerate().for_each(|(t, fl)| {
+            if fl.u.len() != w * h {
+                return;
+            }
+            for i in 0..w * h {
+                if fl.u[i] {
+                    continue;
+                }
+                let from_next = t + 1 < n && valid_f[t][i] && hit(&us[t + 1], &fwd[t], i);
+                let from_prev = t > 0 && valid_b[t - 1][i] && hit(&us[t - 1], &bwd[t - 1], i);
+                if from_next || from_prev {
+                    fl.u[i] = true;
+                    fl.l[i] = false;
+                }
+            }
+        });
+    }
+    for fl in labels.iter_mut() {
+        let m = fl.u.len().max(1) as f32;
+        fl.u_coverage = fl.u.iter().filter(|b| **b).count() as f32 / m;
+        fl.l_coverage = fl.l.iter().filter(|b| **b).count() as f32 / m;
+    }
+}
+
 #[cfg(test)]
 mod tests {
     #![allow(clippy::unwrap_used, clippy::expect_used)]
     use super::*;
     use crate::plane::Plane;
+
+    #[test]
+    fn u_propagates_along_the_flow_and_clears_l() {
+        // U only in frame 0 (a 4×4 square); the scene moves 2 px right per
+        // frame. After 2 passes frames 1 and 2 have U on the moved square,
+        // L is cleared there, and frame 3 (3 frames away) has none.
+        let (w, h, n) = (30, 12, 4);
+        let mut labels: Vec<FrameLabels> = (0..n)
+            .map(|t| FrameLabels {
+                s: vec![0.0; w * h],
+                u: (0..w * h)
+                    .map(|i| t == 0 && (4..8).contains(&(i % w)) && (4..8).contains(&(i / w)))
+                    .collect(),
+                l: vec![t != 0; w * h],
+                v: 2.0,
+                inlier_ratio: 1.0,
+                u_coverage: 0.0,
+                l_coverage: 0.0,
+                valid_ratio: 1.0,
+            })
+            .collect();
+        let flow = |d: f32| Flow {
+            u: Plane::filled(w, h, d),
+            v: Plane::filled(w, h, 0.0),
+        };
+        let fwd = vec![flow(2.0); n - 1];
+        let bwd = vec![flow(-2.0); n - 1];
+        let valid = vec![vec![true; w * h]; n - 1];
+        propagate_u(&mut labels, &fwd, &bwd, &valid, &valid, 2);
+        for t in 1..3 {
+            for i in 0..w * h {
+                let (x, y) = (i % w, i / w);
+                let inside = (4 + 2 * t..8 + 2 * t).contains(&x) && (4..8).contains(&y);
+                assert_eq!(labels[t].u[i], inside, "frame {t} ({x}, {y})");
+                assert_eq!(labels[t].l[i], !inside);
+            }
+            assert!((labels[t].u_coverage - 16.0 / (w * h) as f32).abs() < 1e-6);
+        }
+        assert!(labels[3].u.iter().all(|u| !u));
+    }
 
     #[test]
     fn cycle_check_flags_inconsistent_flow() {

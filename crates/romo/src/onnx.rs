@@ -130,7 +130,7 @@ impl FeatureExtractor for WithHand {
     }
 
     fn extract(&self, frame: &Rgb, w: usize, h: usize) -> Result<FeatureMap> {
-        let a = HandFeatures.extract(frame, w, h)?;
+        let a = HandFeatures::default().extract(frame, w, h)?;
         let b = self.0.extract(frame, w, h)?;
         FeatureMap::concat(&[a, b]).ok_or_else(|| RomoError::Onnx("feature sizes differ".into()))
     }

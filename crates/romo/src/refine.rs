@@ -32,8 +32,18 @@ pub struct RefineOptions {
     /// geometrically static (sky, crowd) as moving. Default: see README.
     pub static_veto_factor: f32,
     /// Weight of each neighbouring frame's probability in the temporal
-    /// smoothing `(1 − 2w)·H_t + w·(H_{t−1} + H_{t+1})` (default 0 = off).
+    /// smoothing `(1 − 2w)·H_t + w·(H_{t−1} + H_{t+1})` (ours; default 0.25,
+    /// 0 = off; DAVIS mean J +0.002 along the flow, see README).
     pub temporal_weight: f32,
+    /// Temporal smoothing follows the optical flow (ours; the issue's
+    /// optional item): the neighbours' probabilities are sampled where each
+    /// pixel's forward / backward flow lands, only where that flow passed
+    /// the cycle check (elsewhere the frame's own value stands in). False =
+    /// the same pixel in the neighbouring frames (default true).
+    pub temporal_along_flow: bool,
+    /// Passes of the temporal smoothing (each widens its support by one
+    /// frame per side; default 1).
+    pub temporal_passes: usize,
 }
 
 impl Default for RefineOptions {
@@ -44,7 +54,9 @@ impl Default for RefineOptions {
             subsample: 4,
             static_veto_factor: 0.05,
             threshold: 0.5,
-            temporal_weight: 0.0,
+            temporal_weight: 0.25,
+            temporal_along_flow: true,
+            temporal_passes: 1,
         }
     }
 }
@@ -153,6 +165,61 @@ pub fn temporal_smooth(probs: &[Plane], w: f32) -> Vec<Plane> {
         .collect()
 }
 
+/// Temporal smoothing along the flow: `(1 − 2w)·H_t + w·(H_{t−1}(x + b_t(x))
+/// + H_{t+1}(x + f_t(x)))`, where `f_t` (frame t → t+1, `fwd[t]`) and `b_t`
+/// (t → t−1, `bwd[t−1]`) are the pair flows on the probability grid and a
+/// neighbour whose flow failed the cycle check (`valid_*` false) is replaced
+/// by `H_t`. `passes` repeats it.
+pub fn temporal_smooth_flow(
+    probs: &[Plane],
+    fwd: &[crate::flow::Flow],
+    bwd: &[crate::flow::Flow],
+    valid_f: &[Vec<bool>],
+    valid_b: &[Vec<bool>],
+    w: f32,
+    passes: usize,
+) -> Vec<Plane> {
+    use rayon::prelude::*;
+    let n = probs.len();
+    if w <= 0.0 || n < 2 || fwd.len() + 1 != n || bwd.len() + 1 != n {
+        return probs.to_vec();
+    }
+    let mut cur = probs.to_vec();
+    for _ in 0..passes {
+        cur = (0..n)
+            .into_par_iter()
+            .map(|t| {
+                let p = &cur[t];
+                let data = (0..p.data.len())
+                    .map(|i| {
+                        let (x, y) = ((i % p.w) as f32, (i / p.w) as f32);
+                        let own = p.data[i];
+                        let prev = if t > 0 && valid_b[t - 1][i] {
+                            let f = &bwd[t - 1];
+                            cur[t - 1].bilinear(x + f.u.data[i], y + f.v.data[i])
+                        } else {
+                            own
+                        };
+                        let next = if t + 1 < n && valid_f[t][i] {
+                            let f = &fwd[t];
+                            cur[t + 1].bilinear(x + f.u.data[i], y + f.v.data[i])
+                        } else {
+                            own
+                        };
+                        (1.0 - 2.0 * w) * own + w * (prev + next)
+                    })
+                    .collect();
+                Plane {
+                    w: p.w,
+                    h: p.h,
+                    data,
+                }
+            })
+            .collect();
+    }
+    cur
+}
+
 /// Full-resolution moving probability from a low-resolution one, guided by
 /// the frame's luma `guide` (values in [0, 1]).
 pub fn upsample_probability(prob: &Plane, guide: &Plane, o: &RefineOptions) -> Plane {
@@ -220,6 +287,49 @@ mod tests {
         assert!(disagree < 48, "{disagree}");
         // s = 1 is the exact filter.
         assert_eq!(fast_guided_filter(&g, &p, 8, 1e-3, 1), exact);
+    }
+
+    #[test]
+    fn smoothing_along_the_flow_keeps_a_moving_square_sharp() {
+        // A square moving 3 px right per frame: along the flow the
+        // neighbours agree, so the interior stays 1 and the outside 0;
+        // smoothing at fixed pixels blurs its leading and trailing edges.
+        use crate::flow::Flow;
+        let (w, h, n) = (40, 20, 4);
+        let sq = |t: usize| {
+            Plane::from_fn(w, h, move |x, y| {
+                let x0 = 5 + 3 * t;
+                ((x0..x0 + 8).contains(&x) && (6..14).contains(&y)) as u8 as f32
+            })
+        };
+        let probs: Vec<Plane> = (0..n).map(sq).collect();
+        let fwd = vec![
+            Flow {
+                u: Plane::filled(w, h, 3.0),
+                v: Plane::filled(w, h, 0.0)
+            };
+            n - 1
+        ];
+        let bwd = vec![
+            Flow {
+                u: Plane::filled(w, h, -3.0),
+                v: Plane::filled(w, h, 0.0)
+            };
+            n - 1
+        ];
+        let valid = vec![vec![true; w * h]; n - 1];
+        let s = temporal_smooth_flow(&probs, &fwd, &bwd, &valid, &valid, 0.25, 2);
+        for t in 1..n - 1 {
+            for i in 0..w * h {
+                assert!((s[t].data[i] - probs[t].data[i]).abs() < 1e-5, "{t} {i}");
+            }
+        }
+        let fixed = temporal_smooth(&probs, 0.25);
+        assert!((fixed[1].at(8, 10) - 0.75).abs() < 1e-5); // trailing edge blurred
+        // Invalid flow: the frame's own value stands in (no change at all).
+        let none = vec![vec![false; w * h]; n - 1];
+        let s = temporal_smooth_flow(&probs, &fwd, &bwd, &none, &none, 0.25, 1);
+        assert_eq!(s, probs);
     }
 
     #[test]

@@ -52,7 +52,9 @@ impl FrameSource for SceneSource<'_> {
 /// The feature extractor selected by the options.
 pub fn make_extractor(o: &RomoOptions) -> Result<Box<dyn FeatureExtractor>> {
     match &o.features {
-        FeatureBackend::Hand => Ok(Box::new(HandFeatures)),
+        FeatureBackend::Hand => Ok(Box::new(HandFeatures {
+            chromaticity: o.chromaticity_features,
+        })),
         #[cfg(feature = "onnx")]
         FeatureBackend::Onnx { model } => Ok(Box::new(crate::onnx::WithHand(
             crate::onnx::OnnxFeatures::load(model)?,
