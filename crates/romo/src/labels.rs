@@ -361,14 +361,14 @@ mod tests {
         let bwd = vec![flow(-2.0); n - 1];
         let valid = vec![vec![true; w * h]; n - 1];
         propagate_u(&mut labels, &fwd, &bwd, &valid, &valid, 2);
-        for t in 1..3 {
+        for (t, lab) in labels.iter().enumerate().take(3).skip(1) {
             for i in 0..w * h {
                 let (x, y) = (i % w, i / w);
                 let inside = (4 + 2 * t..8 + 2 * t).contains(&x) && (4..8).contains(&y);
-                assert_eq!(labels[t].u[i], inside, "frame {t} ({x}, {y})");
-                assert_eq!(labels[t].l[i], !inside);
+                assert_eq!(lab.u[i], inside, "frame {t} ({x}, {y})");
+                assert_eq!(lab.l[i], !inside);
             }
-            assert!((labels[t].u_coverage - 16.0 / (w * h) as f32).abs() < 1e-6);
+            assert!((lab.u_coverage - 16.0 / (w * h) as f32).abs() < 1e-6);
         }
         assert!(labels[3].u.iter().all(|u| !u));
     }
