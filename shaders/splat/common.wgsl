@@ -303,6 +303,30 @@ fn view_dir(m: vec3<f32>, cam: CameraUniforms) -> vec4<f32> {
     return vec4<f32>(0.0, 0.0, 1.0, 0.0);
 }
 
+// Half widths (x, y) of the axis-aligned box around a splat's mean outside
+// which α = o·G < 1/255 at every pixel, so `alpha_at` skips it: α ≥ 1/255
+// needs Mahalanobis d² ≤ 2 ln(255 o), and |dx| ≤ d·sqrt(Σ'xx) with
+// Σ' = conic⁻¹. Unlike the tile extents this is not capped at 3σ: it only
+// lets rasterizers skip work that `alpha_at` would skip anyway (the margins
+// cover f32 rounding of α near the threshold). Negative = no pixel at all;
+// NaN (degenerate conic) compares false in `box_misses`, so nothing is skipped.
+fn alpha_box(conic: vec3<f32>, o: f32) -> vec2<f32> {
+    let th = 255.0 * o;
+    if (!(th > 1.0)) {
+        return vec2<f32>(-1.0);
+    }
+    let k2 = 2.0 * log(th) + 0.01;
+    let det = conic.x * conic.z - conic.y * conic.y;
+    return sqrt(k2 * vec2<f32>(conic.z, conic.x) / det) * 1.001 + 0.01;
+}
+
+// True when every pixel centre of [bmin, bmax] lies outside a splat's
+// `alpha_box` `half` around `mean` (so no pixel there gets α ≥ 1/255).
+fn box_misses(mean: vec2<f32>, half: vec2<f32>, bmin: vec2<f32>, bmax: vec2<f32>) -> bool {
+    let gap = max(max(bmin - mean, mean - bmax), vec2<f32>(0.0));
+    return gap.x > half.x || gap.y > half.y;
+}
+
 // Gaussian falloff at a pixel centre: (alpha, G, dx, dy); alpha < 0 = skip.
 // Mirrors `reference::rasterize::alpha_at`.
 fn alpha_at(mean: vec2<f32>, conic: vec3<f32>, opacity: f32, px: f32, py: f32) -> vec4<f32> {

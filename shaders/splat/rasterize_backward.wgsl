@@ -37,6 +37,15 @@ var<workgroup> s_conic: array<vec4<f32>, 256>;
 var<workgroup> s_color: array<vec4<f32>, 256>;
 var<workgroup> wg_max_last: atomic<u32>;
 var<workgroup> wg_last: u32;
+// Per column block ("list", LIST_COLS columns × 16 rows; LIST_COLS comes
+// from the host: 8 when every subgroup lies inside one block, else 16):
+// the batch slots of splats that can touch the block, in traversal order.
+const LISTS: u32 = TILE_SIZE / LIST_COLS;
+var<workgroup> s_list: array<u32, 512>;
+var<workgroup> s_cnt: array<u32, 32>;
+var<workgroup> s_len: array<u32, 2>;
+var<workgroup> wg_list_max: array<atomic<u32>, 2>;
+var<workgroup> wg_list_last: array<u32, 2>;
 
 /// One pixel's backward state (reverse traversal).
 struct Px {
@@ -156,16 +165,29 @@ fn rasterize_backward_main(@builtin(workgroup_id) wid: vec3<u32>, @builtin(local
     my_max = max(my_max, p13.last);
     my_max = max(my_max, p14.last);
     my_max = max(my_max, p15.last);
+    let my_list = lid3.x / LIST_COLS;
     if (lid == 0u) {
         atomicStore(&wg_max_last, 0u);
+        atomicStore(&wg_list_max[0], 0u);
+        atomicStore(&wg_list_max[1], 0u);
     }
     workgroupBarrier();
     atomicMax(&wg_max_last, my_max);
+    atomicMax(&wg_list_max[my_list], my_max);
     workgroupBarrier();
     if (lid == 0u) {
         wg_last = atomicLoad(&wg_max_last);
+        wg_list_last[0] = atomicLoad(&wg_list_max[0]);
+        wg_list_last[1] = atomicLoad(&wg_list_max[1]);
     }
     let max_last = workgroupUniformLoad(&wg_last);
+    let list_last0 = wg_list_last[0];
+    let list_last1 = wg_list_last[1];
+    // Pixel-centre bounds of the two column blocks.
+    let bmin0 = vec2<f32>(f32(wid.x * TILE_SIZE) + 0.5, f32(wid.y * TILE_SIZE) + 0.5);
+    let bmax0 = bmin0 + vec2<f32>(f32(LIST_COLS - 1u), f32(TILE_SIZE - 1u));
+    let bmin1 = bmin0 + vec2<f32>(f32(LIST_COLS), 0.0);
+    let bmax1 = bmax0 + vec2<f32>(f32(LIST_COLS), 0.0);
     // Every invocation is active here: pick each subgroup's atomic issuer once.
     let leader = grad_leader(lid);
     // Batches from the back: [batch_lo, batch_hi).
@@ -177,23 +199,69 @@ fn rasterize_backward_main(@builtin(workgroup_id) wid: vec3<u32>, @builtin(local
         let batch_lo = max(start, select(0u, batch_hi - TILE_PIXELS, batch_hi >= TILE_PIXELS));
         let count = batch_hi - batch_lo;
         workgroupBarrier();
+        // Load: invocation `lid` fills slots [16·lid, 16·lid + 16) and flags
+        // the splats that can touch each block (`alpha_box`, conservative, and
+        // not past the block's last contributor), then the flags are
+        // compacted in order: each block walks only its own list, so a splat
+        // that misses a block costs it nothing (llvmpipe executes masked
+        // `if` bodies anyway, but not loop iterations that do not exist).
+        var f0 = 0u;
+        var f1 = 0u;
         for (var q = 0u; q < TILE_PIXELS / THREADS; q++) {
-            let idx = lid + THREADS * q;
+            let idx = lid * (TILE_PIXELS / THREADS) + q;
             if (idx < count) {
                 let k = batch_hi - 1u - idx;
                 let id = tile_values[k];
                 let p = projected[id];
                 s_id[idx] = id;
                 s_mean_op[idx] = vec4<f32>(p.mean_x, p.mean_y, p.opacity, 0.0);
-                s_conic[idx] = vec4<f32>(p.conic_a, p.conic_b, p.conic_c, 0.0);
+                let conic = vec3<f32>(p.conic_a, p.conic_b, p.conic_c);
+                s_conic[idx] = vec4<f32>(conic, 0.0);
                 s_color[idx] = vec4<f32>(p.color_r, p.color_g, p.color_b, 0.0);
+                let k_rel = k - start;
+                let mean = vec2<f32>(p.mean_x, p.mean_y);
+                let half = alpha_box(conic, p.opacity);
+                if (k_rel < list_last0 && !box_misses(mean, half, bmin0, bmax0)) {
+                    f0 |= 1u << q;
+                }
+                if (LISTS > 1u && k_rel < list_last1 && !box_misses(mean, half, bmin1, bmax1)) {
+                    f1 |= 1u << q;
+                }
+            }
+        }
+        s_cnt[lid] = countOneBits(f0);
+        s_cnt[THREADS + lid] = countOneBits(f1);
+        workgroupBarrier();
+        if (lid < LISTS) {
+            var total = 0u;
+            for (var t = 0u; t < THREADS; t++) {
+                let c = s_cnt[lid * THREADS + t];
+                s_cnt[lid * THREADS + t] = total;
+                total += c;
+            }
+            s_len[lid] = total;
+        }
+        workgroupBarrier();
+        var o0 = s_cnt[lid];
+        var o1 = TILE_PIXELS + s_cnt[THREADS + lid];
+        for (var q = 0u; q < TILE_PIXELS / THREADS; q++) {
+            let idx = lid * (TILE_PIXELS / THREADS) + q;
+            if (((f0 >> q) & 1u) != 0u) {
+                s_list[o0] = idx;
+                o0++;
+            }
+            if (((f1 >> q) & 1u) != 0u) {
+                s_list[o1] = idx;
+                o1++;
             }
         }
         workgroupBarrier();
-        // No early exit in this loop: it stays subgroup-uniform for
-        // `grad_acc` (entries at or past a pixel's `last` are skipped in
-        // `px_step`).
-        for (var j = 0u; j < count; j++) {
+        // The trip count is uniform over a block's invocations, so the loop
+        // stays subgroup-uniform for `grad_acc` (entries at or past a
+        // pixel's `last` are skipped in `px_step`).
+        let len = s_len[my_list];
+        for (var m = 0u; m < len; m++) {
+            let j = s_list[my_list * TILE_PIXELS + m];
             let k_rel = batch_hi - 1u - j - start; // position in the tile list
             let mo = s_mean_op[j];
             let conic = s_conic[j].xyz;

@@ -3,7 +3,9 @@
 //! kernels on a shared machine: prints, per kernel, the median and the
 //! minimum ms over the steps (the minimum is the least load-sensitive).
 //! Scene: `STEP_BENCH_SCENE` (default `../shared/data/fox` from the repo
-//! root), `STEP_BENCH_DOWNSCALE` (default 4), `STEP_BENCH_STEPS` (default 5).
+//! root), `STEP_BENCH_DOWNSCALE` (default 4), `STEP_BENCH_STEPS` (default 5);
+//! `STEP_BENCH_PLY` trains splats from a PLY (e.g. a trained scene) instead
+//! of the scene's initial ones.
 //! Run: `cargo bench -p splat --bench step_profile`.
 #![allow(clippy::unwrap_used, clippy::expect_used)]
 
@@ -33,7 +35,10 @@ fn main() {
     let cams: Vec<_> = views.iter().map(|v| v.camera).collect();
     let extent = scene_extent(&cams);
     let opts = TrainOptions::default();
-    let (splats, _) = initial_splats(&scene, &cams, extent, &opts).unwrap();
+    let splats = match std::env::var("STEP_BENCH_PLY") {
+        Ok(p) => splat::io::read_ply(p).unwrap(),
+        Err(_) => initial_splats(&scene, &cams, extent, &opts).unwrap().0,
+    };
     let mut b = GpuBackend::new(&GpuOptions {
         timestamps: true,
         ..Default::default()

@@ -32,6 +32,9 @@ fn main() {
         ..Default::default()
     };
     let (mut circle, mut tight, mut views) = (0u64, 0u64, 0u64);
+    // (tile, splat, 8-column half) triples, and those where the splat's α ≥ 1/255
+    // box (`alpha_box` in common.wgsl, without its margins) misses the half.
+    let (mut halves, mut missed) = (0u64, 0u64);
     for cam in cams.iter().take(8) {
         let grid = cam.tile_grid();
         let proj = splat::reference::project(&splats, cam, &opts);
@@ -39,7 +42,33 @@ fn main() {
         for p in &proj {
             circle += area(tile_rect(p.mean2d, p.radius, [p.radius; 2], grid));
             let e = splat::reference::project::unpack_extent(p._pad);
-            tight += area(tile_rect(p.mean2d, p.radius, e, grid));
+            let rect = tile_rect(p.mean2d, p.radius, e, grid);
+            tight += area(rect);
+            let Some(r) = rect else { continue };
+            let [a, b, c] = p.conic.map(|v| v as f64);
+            let th = 255.0 * p.opacity as f64;
+            let det = a * c - b * b;
+            let half = if th > 1.0 {
+                let k2 = 2.0 * th.ln();
+                [(k2 * c / det).sqrt(), (k2 * a / det).sqrt()]
+            } else {
+                [-1.0, -1.0]
+            };
+            let m = p.mean2d.map(|v| v as f64);
+            for ty in r[1]..r[3] {
+                for tx in r[0]..r[2] {
+                    for h in 0..2u32 {
+                        let x0 = (tx * 16 + h * 8) as f64 + 0.5;
+                        let y0 = (ty * 16) as f64 + 0.5;
+                        let gx = (x0 - m[0]).max(m[0] - (x0 + 7.0)).max(0.0);
+                        let gy = (y0 - m[1]).max(m[1] - (y0 + 15.0)).max(0.0);
+                        halves += 1;
+                        if gx > half[0] || gy > half[1] {
+                            missed += 1;
+                        }
+                    }
+                }
+            }
         }
         views += 1;
     }
@@ -53,6 +82,7 @@ fn main() {
             "intersections_circle_3sigma": circle as f64 / v,
             "intersections_tight": tight as f64 / v,
             "ratio": tight as f64 / circle.max(1) as f64,
+            "half_tile_blocks_missed_by_alpha_box": missed as f64 / halves.max(1) as f64,
         })
     );
 }

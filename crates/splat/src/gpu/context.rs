@@ -38,6 +38,11 @@ pub struct GpuContext {
     pub subgroups: bool,
     /// True when timestamp queries were enabled.
     pub timestamps: bool,
+    /// Column-block width of `rasterize_backward`'s per-block splat lists:
+    /// 8 when subgroups are off or every possible subgroup size divides 8
+    /// (so no subgroup spans two blocks and `grad_acc` stays
+    /// subgroup-uniform), else 16 (one block per tile).
+    pub list_cols: u32,
     /// Device limits in force.
     pub limits: wgpu::Limits,
 }
@@ -101,10 +106,19 @@ impl GpuContext {
             trace: wgpu::Trace::Off,
         }))
         .map_err(|e| GpuError::Device(e.to_string()))?;
+        let adapter_info = adapter.get_info();
+        let list_cols = if !subgroups
+            || (adapter_info.subgroup_max_size <= 8 && adapter_info.subgroup_min_size >= 1)
+        {
+            8
+        } else {
+            16
+        };
         Ok(GpuContext {
             device,
             queue,
-            adapter_info: adapter.get_info(),
+            adapter_info,
+            list_cols,
             float_atomics,
             subgroups,
             timestamps,

@@ -87,10 +87,25 @@ fn grad_acc(i: u32, v: f32, leader: bool) { grad_add(i, v); }\n";
 /// The full WGSL module text for a kernel, atomics variant and subgroup
 /// variant (`subgroups` only matters for kernels with gradient atomics).
 pub fn shader_source(decl: &KernelDecl, float_atomics: bool, subgroups: bool) -> String {
+    shader_source_cols(decl, float_atomics, subgroups, 8)
+}
+
+/// [`shader_source`] with the column-block width `list_cols` (8 or 16) of
+/// `rasterize_backward`'s per-block splat lists (see
+/// [`GpuContext::list_cols`]).
+pub fn shader_source_cols(
+    decl: &KernelDecl,
+    float_atomics: bool,
+    subgroups: bool,
+    list_cols: u32,
+) -> String {
     let mut s = String::with_capacity(COMMON_WGSL.len() + decl.source.len() + 512);
     let subgroups = subgroups && decl.uses_grad_atomics;
     s.push_str(COMMON_WGSL);
     s.push('\n');
+    if decl.uses_grad_atomics {
+        s.push_str(&format!("const LIST_COLS: u32 = {list_cols}u;\n"));
+    }
     if decl.uses_grad_atomics {
         s.push_str(if float_atomics {
             ATOMIC_FLOAT_WGSL
@@ -159,7 +174,8 @@ impl Kernel {
             .create_shader_module(wgpu::ShaderModuleDescriptor {
                 label: Some(decl.name),
                 source: wgpu::ShaderSource::Wgsl(
-                    shader_source(decl, ctx.float_atomics, ctx.subgroups).into(),
+                    shader_source_cols(decl, ctx.float_atomics, ctx.subgroups, ctx.list_cols)
+                        .into(),
                 ),
             });
         let pipelines = decl
