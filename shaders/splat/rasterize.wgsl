@@ -8,8 +8,10 @@
 // read of a splat from workgroup memory serves PPT pixels: on CPU drivers
 // (llvmpipe) every workgroup-memory read inside a loop is a per-lane gather,
 // and those reads, not the arithmetic, dominated the 1-pixel-per-invocation
-// kernel. The eight pixels are named `Px` values updated by an inlined
-// function (an indexed private array would become per-lane scratch memory).
+// kernel. The sixteen pixels (a whole tile column) are named `Px` values
+// updated by an inlined function (an indexed private array would become
+// per-lane scratch memory). Each 8-column block walks only the splats that
+// can reach it (see the batch loop), which on a trained scene skips many.
 
 @group(0) @binding(0) var<uniform> cam: CameraUniforms;
 @group(0) @binding(1) var<storage, read> projected: array<ProjectedSplat>;
@@ -19,12 +21,18 @@
 @group(0) @binding(5) var<storage, read_write> final_t: array<f32>;
 @group(0) @binding(6) var<storage, read_write> last_contrib: array<u32>;
 
-const PPT: u32 = 8u;
-const THREADS: u32 = 32u; // 16 columns × (16 / PPT) rows
+const PPT: u32 = 16u;
+const THREADS: u32 = 16u; // 16 columns × (16 / PPT) rows
+// Column blocks of 8 × 16 pixels (one SIMD group on llvmpipe), each with its
+// own list of the batch's splats that can reach it.
+const BLOCK_COLS: u32 = 8u;
 
 var<workgroup> s_mean_op: array<vec4<f32>, 256>;  // mean x, mean y, opacity
 var<workgroup> s_conic: array<vec4<f32>, 256>;    // a, b, c
 var<workgroup> s_color: array<vec4<f32>, 256>;    // r, g, b
+var<workgroup> s_list: array<u32, 512>;
+var<workgroup> s_cnt: array<u32, 32>;
+var<workgroup> s_len: array<u32, 2>;
 var<workgroup> n_done: atomic<u32>;
 var<workgroup> all_done: u32;
 
@@ -75,13 +83,18 @@ fn px_write(p: Px, x: u32, y: u32) {
     }
 }
 
-@compute @workgroup_size(16, 2)
+@compute @workgroup_size(16, 1)
 fn rasterize_main(@builtin(workgroup_id) wid: vec3<u32>, @builtin(local_invocation_id) lid3: vec3<u32>,
                   @builtin(local_invocation_index) lid: u32) {
     let tile = wid.y * cam.grid_x + wid.x;
     let x = wid.x * TILE_SIZE + lid3.x;
     let y0 = wid.y * TILE_SIZE + lid3.y * PPT;
     let px = f32(x) + 0.5;
+    let my_block = lid3.x / BLOCK_COLS;
+    let bmin0 = vec2<f32>(f32(wid.x * TILE_SIZE) + 0.5, f32(wid.y * TILE_SIZE) + 0.5);
+    let bmax0 = bmin0 + vec2<f32>(f32(BLOCK_COLS - 1u), f32(TILE_SIZE - 1u));
+    let bmin1 = bmin0 + vec2<f32>(f32(BLOCK_COLS), 0.0);
+    let bmax1 = bmax0 + vec2<f32>(f32(BLOCK_COLS), 0.0);
     let start = ranges[2u * tile];
     let end = max(ranges[2u * tile + 1u], start);
     if (lid == 0u) {
@@ -96,8 +109,15 @@ fn rasterize_main(@builtin(workgroup_id) wid: vec3<u32>, @builtin(local_invocati
     var p5 = px_init(x, y0 + 5u);
     var p6 = px_init(x, y0 + 6u);
     var p7 = px_init(x, y0 + 7u);
-    var n_live = u32(p0.live) + u32(p1.live) + u32(p2.live) + u32(p3.live)
-        + u32(p4.live) + u32(p5.live) + u32(p6.live) + u32(p7.live);
+    var p8 = px_init(x, y0 + 8u);
+    var p9 = px_init(x, y0 + 9u);
+    var p10 = px_init(x, y0 + 10u);
+    var p11 = px_init(x, y0 + 11u);
+    var p12 = px_init(x, y0 + 12u);
+    var p13 = px_init(x, y0 + 13u);
+    var p14 = px_init(x, y0 + 14u);
+    var p15 = px_init(x, y0 + 15u);
+    var n_live = u32(p0.live) + u32(p1.live) + u32(p2.live) + u32(p3.live) + u32(p4.live) + u32(p5.live) + u32(p6.live) + u32(p7.live) + u32(p8.live) + u32(p9.live) + u32(p10.live) + u32(p11.live) + u32(p12.live) + u32(p13.live) + u32(p14.live) + u32(p15.live);
     var done = n_live == 0u;
     if (done) {
         atomicAdd(&n_done, 1u);
@@ -110,19 +130,62 @@ fn rasterize_main(@builtin(workgroup_id) wid: vec3<u32>, @builtin(local_invocati
         if (workgroupUniformLoad(&all_done) == THREADS) {
             break;
         }
+        // Load slots [16·lid, 16·lid + 16), flag the splats whose α ≥ 1/255
+        // box (`alpha_box`, conservative) meets each column block, and
+        // compact the flags in order: a block walks only its own list, so a
+        // splat that cannot reach it costs it nothing (llvmpipe runs masked
+        // `if` bodies anyway, but not loop iterations that do not exist).
+        var f0 = 0u;
+        var f1 = 0u;
         for (var q = 0u; q < TILE_PIXELS / THREADS; q++) {
-            let idx = lid + THREADS * q;
+            let idx = lid * (TILE_PIXELS / THREADS) + q;
             let k = batch + idx;
             if (k < end) {
                 let p = projected[tile_values[k]];
                 s_mean_op[idx] = vec4<f32>(p.mean_x, p.mean_y, p.opacity, 0.0);
-                s_conic[idx] = vec4<f32>(p.conic_a, p.conic_b, p.conic_c, 0.0);
+                let conic = vec3<f32>(p.conic_a, p.conic_b, p.conic_c);
+                s_conic[idx] = vec4<f32>(conic, 0.0);
                 s_color[idx] = vec4<f32>(p.color_r, p.color_g, p.color_b, 0.0);
+                let mean = vec2<f32>(p.mean_x, p.mean_y);
+                let half = alpha_box(conic, p.opacity);
+                if (!box_misses(mean, half, bmin0, bmax0)) {
+                    f0 |= 1u << q;
+                }
+                if (!box_misses(mean, half, bmin1, bmax1)) {
+                    f1 |= 1u << q;
+                }
+            }
+        }
+        s_cnt[lid] = countOneBits(f0);
+        s_cnt[THREADS + lid] = countOneBits(f1);
+        workgroupBarrier();
+        if (lid < 2u) {
+            var total = 0u;
+            for (var t = 0u; t < THREADS; t++) {
+                let c = s_cnt[lid * THREADS + t];
+                s_cnt[lid * THREADS + t] = total;
+                total += c;
+            }
+            s_len[lid] = total;
+        }
+        workgroupBarrier();
+        var o0 = s_cnt[lid];
+        var o1 = TILE_PIXELS + s_cnt[THREADS + lid];
+        for (var q = 0u; q < TILE_PIXELS / THREADS; q++) {
+            let idx = lid * (TILE_PIXELS / THREADS) + q;
+            if (((f0 >> q) & 1u) != 0u) {
+                s_list[o0] = idx;
+                o0++;
+            }
+            if (((f1 >> q) & 1u) != 0u) {
+                s_list[o1] = idx;
+                o1++;
             }
         }
         workgroupBarrier();
-        let count = min(TILE_PIXELS, end - batch);
-        for (var j = 0u; j < count && !done; j++) {
+        let len = s_len[my_block];
+        for (var m = 0u; m < len && !done; m++) {
+            let j = s_list[my_block * TILE_PIXELS + m];
             let mo = s_mean_op[j];
             let conic = s_conic[j].xyz;
             let color = s_color[j].xyz;
@@ -135,6 +198,14 @@ fn rasterize_main(@builtin(workgroup_id) wid: vec3<u32>, @builtin(local_invocati
             ended += px_step(&p5, pos, mo, conic, color, px);
             ended += px_step(&p6, pos, mo, conic, color, px);
             ended += px_step(&p7, pos, mo, conic, color, px);
+            ended += px_step(&p8, pos, mo, conic, color, px);
+            ended += px_step(&p9, pos, mo, conic, color, px);
+            ended += px_step(&p10, pos, mo, conic, color, px);
+            ended += px_step(&p11, pos, mo, conic, color, px);
+            ended += px_step(&p12, pos, mo, conic, color, px);
+            ended += px_step(&p13, pos, mo, conic, color, px);
+            ended += px_step(&p14, pos, mo, conic, color, px);
+            ended += px_step(&p15, pos, mo, conic, color, px);
             n_live -= ended;
             if (n_live == 0u) {
                 done = true;
@@ -150,4 +221,12 @@ fn rasterize_main(@builtin(workgroup_id) wid: vec3<u32>, @builtin(local_invocati
     px_write(p5, x, y0 + 5u);
     px_write(p6, x, y0 + 6u);
     px_write(p7, x, y0 + 7u);
+    px_write(p8, x, y0 + 8u);
+    px_write(p9, x, y0 + 9u);
+    px_write(p10, x, y0 + 10u);
+    px_write(p11, x, y0 + 11u);
+    px_write(p12, x, y0 + 12u);
+    px_write(p13, x, y0 + 13u);
+    px_write(p14, x, y0 + 14u);
+    px_write(p15, x, y0 + 15u);
 }

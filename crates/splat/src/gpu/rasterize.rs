@@ -8,9 +8,9 @@ use super::{GpuContext, GpuError};
 
 /// Workgroup size: one 16×16 tile, each invocation owning a column of
 /// `PIXELS_PER_THREAD` pixels.
-pub const WORKGROUP_SIZE: [u32; 2] = [16, 2];
+pub const WORKGROUP_SIZE: [u32; 2] = [16, 1];
 /// Vertically adjacent pixels per invocation (`PPT` in the shader).
-pub const PIXELS_PER_THREAD: u32 = 8;
+pub const PIXELS_PER_THREAD: u32 = 16;
 
 pub static DECL: KernelDecl = KernelDecl {
     name: "rasterize",
