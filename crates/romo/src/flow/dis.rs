@@ -237,15 +237,7 @@ impl Img<'_> {
     /// displaced by (u, v), and the bilinear weights.
     #[inline(always)]
     fn locate<const P: usize>(&self, x0: usize, y0: usize, u: f32, v: f32) -> (usize, [f32; 4]) {
-        // Shift by the padding so coordinates are non-negative: the cast
-        // then floors (std's floor is a libm call without SSE4.1).
-        let b = self.b as f32;
-        let lo = b - P as f32 + 1.0;
-        let px = (x0 as f32 + u + b).clamp(lo, (self.w - 1) as f32 + b);
-        let py = (y0 as f32 + v + b).clamp(lo, (self.h - 1) as f32 + b);
-        let (ix, iy) = (px as usize, py as usize);
-        let (ax, ay) = (px - ix as f32, py - iy as f32);
-        let o = iy * self.wp + ix;
+        let (o, ax, ay) = self.locate_frac::<P>(x0, y0, u, v);
         (
             o,
             [
@@ -257,30 +249,61 @@ impl Img<'_> {
         )
     }
 
+    /// Offset into the padded second image of the (clamped) patch origin
+    /// displaced by (u, v), and the fractional parts (x, y).
+    #[inline(always)]
+    fn locate_frac<const P: usize>(
+        &self,
+        x0: usize,
+        y0: usize,
+        u: f32,
+        v: f32,
+    ) -> (usize, f32, f32) {
+        // Shift by the padding so coordinates are non-negative: the cast
+        // then floors (std's floor is a libm call without SSE4.1).
+        let b = self.b as f32;
+        let lo = b - P as f32 + 1.0;
+        let px = (x0 as f32 + u + b).clamp(lo, (self.w - 1) as f32 + b);
+        let py = (y0 as f32 + v + b).clamp(lo, (self.h - 1) as f32 + b);
+        let (ix, iy) = (px as usize, py as usize);
+        (iy * self.wp + ix, px - ix as f32, py - iy as f32)
+    }
+
     /// Sums over the patch of the difference `d = I1(x+u) − I0(x)`: `[Σd,
-    /// Σd², Σ gx·d, Σ gy·d]`. Per-lane accumulators so the loop vectorises.
+    /// Σd², Σ gx·d, Σ gy·d]`. The bilinear interpolation is separable
+    /// (each of the `P + 1` rows of the second image is interpolated along
+    /// x once, then consecutive rows along y); per-lane accumulators so the
+    /// loops vectorise.
     #[inline(always)]
     fn kernel<const P: usize>(&self, p: &Patch, u: f32, v: f32) -> [f32; 4] {
-        let (o1, wt) = self.locate::<P>(p.x0, p.y0, u, v);
+        let (o1, ax, ay) = self.locate_frac::<P>(p.x0, p.y0, u, v);
         let o0 = p.y0 * self.w + p.x0;
         let mut sd = [0.0f32; P];
         let mut sd2 = [0.0f32; P];
         let mut sx = [0.0f32; P];
         let mut sy = [0.0f32; P];
+        let lerp_row = |r: usize| {
+            let t = &self.i1p[o1 + r * self.wp..][..P + 1];
+            let mut out = [0.0f32; P];
+            for j in 0..P {
+                out[j] = t[j] + ax * (t[j + 1] - t[j]);
+            }
+            out
+        };
+        let mut prev = lerp_row(0);
         for r in 0..P {
             let a = &self.i0[o0 + r * self.w..][..P];
             let gx = &self.gx[o0 + r * self.w..][..P];
             let gy = &self.gy[o0 + r * self.w..][..P];
-            let t0 = &self.i1p[o1 + r * self.wp..][..P + 1];
-            let t1 = &self.i1p[o1 + (r + 1) * self.wp..][..P + 1];
+            let next = lerp_row(r + 1);
             for j in 0..P {
-                let d =
-                    wt[0] * t0[j] + wt[1] * t0[j + 1] + wt[2] * t1[j] + wt[3] * t1[j + 1] - a[j];
+                let d = prev[j] + ay * (next[j] - prev[j]) - a[j];
                 sd[j] += d;
                 sd2[j] += d * d;
                 sx[j] += d * gx[j];
                 sy[j] += d * gy[j];
             }
+            prev = next;
         }
         [
             sd.iter().sum(),
