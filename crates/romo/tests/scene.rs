@@ -45,14 +45,15 @@ fn small_scene_masks_match_ground_truth_motion() {
         m.j_mean, m.precision, m.recall
     );
     // Measured 2026-11-22 (dev profile, 24 frames + 4 held-out views,
-    // default options): J 0.413, precision 0.82, recall 0.33 (U covers
-    // only ~0.1% of the grid: the pedestrians cross sideways while the
-    // camera dollies sideways, so most of their motion lies along epipolar
-    // lines where the Sampson residual cannot see it). Thresholds a bit
-    // below the measurement.
+    // default options): J 0.429, precision 0.82, recall 0.36 (before the
+    // F-informative override / chromaticity / temporal smoothing: J 0.413).
+    // U covers only ~0.1% of the grid: the pedestrians cross sideways while
+    // the camera dollies sideways, so most of their motion lies along
+    // epipolar lines where the Sampson residual cannot see it. Thresholds a
+    // bit below the measurement.
     assert!(m.precision >= 0.6, "precision {}", m.precision);
     assert!(
-        m.j_mean >= 0.35,
+        m.j_mean >= 0.38,
         "J {} (precision {}, recall {})",
         m.j_mean,
         m.precision,
