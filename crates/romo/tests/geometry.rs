@@ -7,7 +7,9 @@ use nalgebra::{Matrix3, Rotation3, Vector3};
 use rand::{Rng, SeedableRng};
 use romo::geometry::Pt;
 use romo::geometry::fundamental::{eight_point, sampson_px, seven_point};
-use romo::geometry::robust::{ModelSelection, RobustOptions, TwoView, fit_two_view};
+use romo::geometry::robust::{
+    ModelSelection, RobustOptions, TwoView, fit_two_view, fit_two_view_all,
+};
 
 fn k() -> Matrix3<f64> {
     Matrix3::new(500.0, 0.0, 320.0, 0.0, 500.0, 240.0, 0.0, 0.0, 1.0)
@@ -138,6 +140,35 @@ fn pure_rotation_selects_homography_and_translation_selects_f() {
         fit_two_view(&a, &b, &ratio).unwrap().0,
         TwoView::Homography(_)
     ));
+}
+
+#[test]
+fn fit_two_view_all_also_returns_the_fundamental_fit() {
+    // Translation: F is chosen, and the returned F is the chosen model and
+    // recovers the true F. Rotation: H is chosen, F is still returned and
+    // fits the (degenerate) data; `Homography` forces H even with parallax.
+    let o = RobustOptions::default();
+    let (a, b, ft) = scene(300, false, 5);
+    let fits = fit_two_view_all(&a, &b, &o).unwrap();
+    assert_eq!(fits.chosen, fits.fundamental);
+    let TwoView::Fundamental(f) = fits.fundamental else {
+        panic!("not F")
+    };
+    assert!(same_up_to_scale(&f, &ft) < 1e-3, "{f} vs {ft}");
+    assert_eq!(fits.fundamental_report.model, "F");
+    let (a, b, _) = scene(300, true, 4);
+    let fits = fit_two_view_all(&a, &b, &o).unwrap();
+    assert!(matches!(fits.chosen, TwoView::Homography(_)));
+    assert!(matches!(fits.fundamental, TwoView::Fundamental(_)));
+    assert!(fits.fundamental_report.median_residual_px < 1e-3);
+    let (a, b, _) = scene(300, false, 5);
+    let forced = RobustOptions {
+        selection: ModelSelection::Homography,
+        ..Default::default()
+    };
+    let fits = fit_two_view_all(&a, &b, &forced).unwrap();
+    assert!(matches!(fits.chosen, TwoView::Homography(_)));
+    assert!(fits.report.median_residual_px > 0.5, "{:?}", fits.report);
 }
 
 #[test]
