@@ -682,7 +682,7 @@ impl Dis {
             } else {
                 pyramid::half(p, 255.0)
             }];
-            for _ in finest.max(1) + 1..=coarsest {
+            for _ in finest + 1..=coarsest {
                 let next = pyramid::half(&v[v.len() - 1], 1.0);
                 v.push(next);
             }
@@ -757,6 +757,10 @@ mod tests {
     }
 
     fn check(map: impl Fn(f32, f32) -> (f32, f32) + Sync, max_epe: f64) {
+        check_with(DisOptions::default(), map, max_epe)
+    }
+
+    fn check_with(opts: DisOptions, map: impl Fn(f32, f32) -> (f32, f32) + Sync, max_epe: f64) {
         let (w, h) = (160, 120);
         // i1(x + flow(x)) = i0(x): i0 samples the texture at the mapped point.
         let i1 = Plane::from_fn(w, h, |x, y| texture(x as f32, y as f32));
@@ -768,7 +772,7 @@ mod tests {
             u: Plane::from_fn(w, h, |x, y| map(x as f32, y as f32).0),
             v: Plane::from_fn(w, h, |x, y| map(x as f32, y as f32).1),
         };
-        let est = Dis::default().compute(&i0, &i1).unwrap();
+        let est = Dis::new(opts).compute(&i0, &i1).unwrap();
         // Ignore a 10-px border where content leaves the frame.
         let mask: Vec<bool> = (0..w * h)
             .map(|i| {
@@ -785,6 +789,16 @@ mod tests {
     #[test]
     fn recovers_a_translation() {
         check(|_, _| (3.4, -1.7), 0.25);
+    }
+
+    /// Full-resolution finest level (the pyramid then starts at level 0).
+    #[test]
+    fn recovers_a_translation_at_full_resolution() {
+        let opts = DisOptions {
+            finest_scale: 0,
+            ..Default::default()
+        };
+        check_with(opts, |_, _| (3.4, -1.7), 0.25);
     }
 
     #[test]
