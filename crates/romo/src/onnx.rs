@@ -18,6 +18,9 @@ use ort::value::Tensor;
 use std::path::Path;
 use std::sync::Mutex;
 
+/// The process's ONNX Runtime environment (at most one may exist).
+static ENV: Mutex<Option<ort::environment::Environment>> = Mutex::new(None);
+
 fn err(ctx: &str, e: impl std::fmt::Display) -> RomoError {
     RomoError::Onnx(format!("{ctx}: {e}"))
 }
@@ -54,10 +57,24 @@ impl OnnxFeatures {
                 model.display()
             )));
         }
-        let env = ort::init_from(&lib)
-            .map_err(|e| err(&lib.display().to_string(), e))?
-            .build()
-            .map_err(|e| err("ONNX Runtime environment", e))?;
+        // ONNX Runtime allows one environment per process: build it once
+        // and share it, so a process can load models (or run RoMo) twice.
+        let env = {
+            let mut g = ENV
+                .lock()
+                .map_err(|_| RomoError::Onnx("environment lock poisoned".into()))?;
+            match &*g {
+                Some(e) => e.clone(),
+                None => {
+                    let e = ort::init_from(&lib)
+                        .map_err(|e| err(&lib.display().to_string(), e))?
+                        .build()
+                        .map_err(|e| err("ONNX Runtime environment", e))?;
+                    *g = Some(e.clone());
+                    e
+                }
+            }
+        };
         let session = Session::builder(&env)
             .map_err(|e| err("session", e))?
             .commit_from_file(model)
@@ -121,8 +138,9 @@ impl FeatureExtractor for OnnxFeatures {
 }
 
 /// An ONNX encoder's channels concatenated with the built-in descriptor
-/// (our prototype found the two best together).
-pub struct WithHand(pub OnnxFeatures);
+/// (our prototype found the two best together); the second field sets the
+/// descriptor's options (the pipeline passes `chromaticity_features`).
+pub struct WithHand(pub OnnxFeatures, pub HandFeatures);
 
 impl FeatureExtractor for WithHand {
     fn name(&self) -> &str {
@@ -130,7 +148,7 @@ impl FeatureExtractor for WithHand {
     }
 
     fn extract(&self, frame: &Rgb, w: usize, h: usize) -> Result<FeatureMap> {
-        let a = HandFeatures::default().extract(frame, w, h)?;
+        let a = self.1.extract(frame, w, h)?;
         let b = self.0.extract(frame, w, h)?;
         FeatureMap::concat(&[a, b]).ok_or_else(|| RomoError::Onnx("feature sizes differ".into()))
     }

@@ -51,13 +51,15 @@ impl FrameSource for SceneSource<'_> {
 
 /// The feature extractor selected by the options.
 pub fn make_extractor(o: &RomoOptions) -> Result<Box<dyn FeatureExtractor>> {
+    let hand = HandFeatures {
+        chromaticity: o.chromaticity_features,
+    };
     match &o.features {
-        FeatureBackend::Hand => Ok(Box::new(HandFeatures {
-            chromaticity: o.chromaticity_features,
-        })),
+        FeatureBackend::Hand => Ok(Box::new(hand)),
         #[cfg(feature = "onnx")]
         FeatureBackend::Onnx { model } => Ok(Box::new(crate::onnx::WithHand(
             crate::onnx::OnnxFeatures::load(model)?,
+            hand,
         ))),
         #[cfg(not(feature = "onnx"))]
         FeatureBackend::Onnx { model } => Err(RomoError::Onnx(format!(
