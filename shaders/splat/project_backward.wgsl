@@ -13,22 +13,28 @@
 @group(0) @binding(4) var<storage, read> opacity_logits: array<f32>;
 @group(0) @binding(5) var<storage, read> sh: array<f32>;
 @group(0) @binding(6) var<storage, read> v_proj: array<f32>;
-@group(0) @binding(7) var<storage, read_write> g_means: array<f32>;
-@group(0) @binding(8) var<storage, read_write> g_log_scales: array<f32>;
-@group(0) @binding(9) var<storage, read_write> g_rotations: array<f32>;
-@group(0) @binding(10) var<storage, read_write> g_opacity_logits: array<f32>;
-@group(0) @binding(11) var<storage, read_write> g_sh: array<f32>;
-@group(0) @binding(12) var<storage, read_write> mean2d_abs: array<f32>;
+// The geometry gradients share one planar buffer (so the kernel binds 8
+// storage buffers, the GL fallback's per-stage limit): means [0, 3n),
+// log-scales [3n, 6n), rotations [6n, 10n), opacity logits [10n, 11n),
+// ‖dL/d mean2d‖ [11n, 12n). The host copies the segments out.
+@group(0) @binding(7) var<storage, read_write> g_geom: array<f32>;
+@group(0) @binding(8) var<storage, read_write> g_sh: array<f32>;
+
+fn set_mean(i: u32, a: u32, v: f32) { g_geom[3u * i + a] = v; }
+fn set_log_scale(i: u32, a: u32, v: f32) { g_geom[3u * cam.n + 3u * i + a] = v; }
+fn set_rotation(i: u32, a: u32, v: f32) { g_geom[6u * cam.n + 4u * i + a] = v; }
+fn set_opacity(i: u32, v: f32) { g_geom[10u * cam.n + i] = v; }
+fn set_mean2d_abs(i: u32, v: f32) { g_geom[11u * cam.n + i] = v; }
 
 fn write_zero(i: u32) {
     for (var a = 0u; a < 3u; a++) {
-        g_means[3u * i + a] = 0.0;
-        g_log_scales[3u * i + a] = 0.0;
+        set_mean(i, a, 0.0);
+        set_log_scale(i, a, 0.0);
     }
     for (var a = 0u; a < 4u; a++) {
-        g_rotations[4u * i + a] = 0.0;
+        set_rotation(i, a, 0.0);
     }
-    g_opacity_logits[i] = 0.0;
+    set_opacity(i, 0.0);
     let k3 = cam.sh_stored * 3u;
     for (var a = 0u; a < k3; a++) {
         g_sh[i * k3 + a] = 0.0;
@@ -47,7 +53,7 @@ fn project_backward_main(@builtin(workgroup_id) wid: vec3<u32>, @builtin(num_wor
     let v_conic = vec3<f32>(v_proj[vb + 4u], v_proj[vb + 5u], v_proj[vb + 6u]);
     let v_opacity = v_proj[vb + 7u];
     let v_color = vec3<f32>(v_proj[vb + 8u], v_proj[vb + 9u], v_proj[vb + 10u]);
-    mean2d_abs[i] = sqrt(v_mean2d.x * v_mean2d.x + v_mean2d.y * v_mean2d.y);
+    set_mean2d_abs(i, sqrt(v_mean2d.x * v_mean2d.x + v_mean2d.y * v_mean2d.y));
 
     let m = vec3<f32>(means[3u * i], means[3u * i + 1u], means[3u * i + 2u]);
     let ls = vec3<f32>(log_scales[3u * i], log_scales[3u * i + 1u], log_scales[3u * i + 2u]);
@@ -102,7 +108,7 @@ fn project_backward_main(@builtin(workgroup_id) wid: vec3<u32>, @builtin(num_wor
     }
     // Opacity.
     let s = it.sig;
-    g_opacity_logits[i] = v_opacity * it.comp * s * (1.0 - s);
+    set_opacity(i, v_opacity * it.comp * s * (1.0 - s));
     let v_comp = v_opacity * s;
     // Conic → dilated covariance: dL/dΣ' = −C G C.
     let ca = it.conic.x; let cb = it.conic.y; let cc = it.conic.z;
@@ -184,10 +190,10 @@ fn project_backward_main(@builtin(workgroup_id) wid: vec3<u32>, @builtin(num_wor
     let dq = dot(it.qn, vq);
     let g_q = (vq - it.qn * dq) / it.qnorm;
     for (var a = 0u; a < 3u; a++) {
-        g_means[3u * i + a] = g_mean[a];
-        g_log_scales[3u * i + a] = g_ls[a];
+        set_mean(i, a, g_mean[a]);
+        set_log_scale(i, a, g_ls[a]);
     }
     for (var a = 0u; a < 4u; a++) {
-        g_rotations[4u * i + a] = g_q[a];
+        set_rotation(i, a, g_q[a]);
     }
 }

@@ -10,6 +10,10 @@ use super::{GpuContext, GpuError};
 
 /// Invocations per workgroup.
 pub const WORKGROUP_SIZE: u32 = 256;
+/// f32 per splat in the planar geometry-gradient scratch (`g_geom`: means 3,
+/// log-scales 3, rotations 4, opacity 1, ‖dL/d mean2d‖ 1), which keeps the
+/// kernel at 8 storage bindings.
+pub const GEOM_FLOATS: u64 = 12;
 
 pub static DECL: KernelDecl = KernelDecl {
     name: "project_backward",
@@ -52,33 +56,13 @@ pub static DECL: KernelDecl = KernelDecl {
             kind: BindingKind::StorageRead,
         },
         BindingDecl {
-            name: "g_means",
+            name: "g_geom",
             binding: 7,
             kind: BindingKind::StorageRw,
         },
         BindingDecl {
-            name: "g_log_scales",
-            binding: 8,
-            kind: BindingKind::StorageRw,
-        },
-        BindingDecl {
-            name: "g_rotations",
-            binding: 9,
-            kind: BindingKind::StorageRw,
-        },
-        BindingDecl {
-            name: "g_opacity_logits",
-            binding: 10,
-            kind: BindingKind::StorageRw,
-        },
-        BindingDecl {
             name: "g_sh",
-            binding: 11,
-            kind: BindingKind::StorageRw,
-        },
-        BindingDecl {
-            name: "mean2d_abs",
-            binding: 12,
+            binding: 8,
             kind: BindingKind::StorageRw,
         },
     ],
@@ -141,6 +125,7 @@ impl ProjectBackward {
         a: &ProjectBackwardArgs,
     ) -> Result<(), GpuError> {
         let (p, g) = (a.params, a.grads);
+        let geom = rec.storage("g_geom", p.n as u64 * GEOM_FLOATS * 4);
         let bind = self.kernel.bind(
             ctx,
             &[
@@ -151,12 +136,8 @@ impl ProjectBackward {
                 ("opacity_logits", &p.opacity_logits),
                 ("sh", &p.sh),
                 ("v_proj", a.v_proj),
-                ("g_means", &g.means),
-                ("g_log_scales", &g.log_scales),
-                ("g_rotations", &g.rotations),
-                ("g_opacity_logits", &g.opacity_logits),
+                ("g_geom", &geom),
                 ("g_sh", &g.sh),
-                ("mean2d_abs", &g.mean2d_abs),
             ],
         )?;
         rec.dispatch(
@@ -164,6 +145,21 @@ impl ProjectBackward {
             "project_backward_main",
             &bind,
             groups_1d(p.n, WORKGROUP_SIZE),
-        )
+        )?;
+        // Planar segments of `g_geom` → the per-group gradient buffers.
+        let n = p.n as u64 * 4;
+        for (seg, dst, floats) in [
+            (0, &g.means, 3),
+            (3, &g.log_scales, 3),
+            (6, &g.rotations, 4),
+            (10, &g.opacity_logits, 1),
+            (11, &g.mean2d_abs, 1),
+        ] {
+            if n > 0 {
+                rec.encoder
+                    .copy_buffer_to_buffer(&geom, seg * n, dst, 0, floats * n);
+            }
+        }
+        Ok(())
     }
 }

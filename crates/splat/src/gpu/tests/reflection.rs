@@ -101,3 +101,59 @@ fn shaders_match_host_binding_tables() {
         }
     }
 }
+
+/// Storage buffers per shader stage that wgpu's GL fallback on llvmpipe
+/// allows (`Limits::max_storage_buffers_per_shader_stage` there), the
+/// tightest adapter the trainer supports.
+const GL_MAX_STORAGE_BUFFERS: usize = 8;
+
+#[test]
+fn every_kernel_binds_at_most_the_gl_storage_buffer_limit() {
+    for decl in crate::gpu::ALL_KERNELS {
+        let declared = decl
+            .bindings
+            .iter()
+            .filter(|b| b.kind != BindingKind::Uniform)
+            .count();
+        assert!(
+            declared <= GL_MAX_STORAGE_BUFFERS,
+            "{}: {declared} storage buffers declared",
+            decl.name
+        );
+        // And what the shader itself binds (every entry point shares group 0).
+        let src = shader_source(decl, false, false);
+        let module = naga::front::wgsl::parse_str(&src).unwrap();
+        let in_shader = module
+            .global_variables
+            .iter()
+            .filter(|(_, v)| v.binding.is_some() && matches!(v.space, AddressSpace::Storage { .. }))
+            .count();
+        assert!(
+            in_shader <= GL_MAX_STORAGE_BUFFERS,
+            "{}: {in_shader} storage buffers in the shader",
+            decl.name
+        );
+    }
+}
+
+/// The 16-column (one list per tile) variant of the gradient kernels, used
+/// on adapters whose subgroups may exceed 8 lanes, validates too.
+#[test]
+fn wide_subgroup_list_variant_validates() {
+    for decl in crate::gpu::ALL_KERNELS
+        .iter()
+        .filter(|d| d.uses_grad_atomics)
+    {
+        for float_atomics in [true, false] {
+            let src = crate::gpu::kernel::shader_source_cols(decl, float_atomics, true, 16);
+            let module = naga::front::wgsl::parse_str(&src)
+                .unwrap_or_else(|e| panic!("{}: {}", decl.name, e.emit_to_string(&src)));
+            naga::valid::Validator::new(
+                naga::valid::ValidationFlags::all(),
+                naga::valid::Capabilities::all(),
+            )
+            .validate(&module)
+            .unwrap_or_else(|e| panic!("{}: {e:?}", decl.name));
+        }
+    }
+}
