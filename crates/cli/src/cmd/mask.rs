@@ -36,6 +36,25 @@ pub struct Args {
     /// Random seed.
     #[arg(long, default_value_t = 0)]
     pub seed: u64,
+    /// Use F instead of GRIC's homography choice when F still labels at
+    /// least this fraction of a pair's points moving (default 0.005; 0 = pure
+    /// GRIC).
+    #[arg(long)]
+    pub f_informative_fraction: Option<f32>,
+    /// Spread moving (U) labels along the flow to this many neighbouring
+    /// frames (default 0 = off).
+    #[arg(long)]
+    pub u_propagation_frames: Option<usize>,
+    /// Weight w of each neighbouring frame in the temporal smoothing of the
+    /// probabilities, (1 − 2w)·H_t + w·(H_{t−1} + H_{t+1}) (default 0.25; 0 = off).
+    #[arg(long)]
+    pub temporal_weight: Option<f32>,
+    /// Passes of the temporal smoothing (default 1).
+    #[arg(long)]
+    pub temporal_passes: Option<usize>,
+    /// Leave the two chromaticity channels out of the built-in features.
+    #[arg(long)]
+    pub no_chromaticity: bool,
 }
 
 /// Run `romosplat mask`.
@@ -59,6 +78,19 @@ pub fn run(args: &Args, ctx: &Ctx) -> anyhow::Result<serde_json::Value> {
     opts.save_probabilities |= args.save_probabilities;
     opts.overlays |= args.overlays;
     opts.seed = args.seed;
+    if let Some(f) = args.f_informative_fraction {
+        opts.labels.f_informative_fraction = f;
+    }
+    if let Some(n) = args.u_propagation_frames {
+        opts.labels.u_propagation_frames = n;
+    }
+    if let Some(w) = args.temporal_weight {
+        opts.refine.temporal_weight = w;
+    }
+    if let Some(n) = args.temporal_passes {
+        opts.refine.temporal_passes = n;
+    }
+    opts.chromaticity_features &= !args.no_chromaticity;
     if let Some(m) = &args.onnx_features {
         opts.features = romo::FeatureBackend::Onnx { model: m.clone() };
     }
