@@ -23,6 +23,10 @@ pub struct GpuOptions {
     pub no_subgroups: bool,
     /// Request timestamp queries when the adapter has them (for profiling).
     pub timestamps: bool,
+    /// Give `rasterize_backward` one splat list per tile (16 columns), as on
+    /// adapters whose subgroups may be wider than 8 lanes, even when 8-column
+    /// lists would do (tests force this to cover that path on lavapipe).
+    pub wide_lists: bool,
 }
 
 /// Adapter, device, queue and the detected capabilities.
@@ -89,9 +93,11 @@ impl GpuContext {
         }
         let adapter_limits = adapter.limits();
         let limits = wgpu::Limits {
+            // Every kernel binds ≤ 8 (the GL fallback's limit; a test checks),
+            // so asking for no more makes wgpu reject a kernel that grows past it.
             max_storage_buffers_per_shader_stage: adapter_limits
                 .max_storage_buffers_per_shader_stage
-                .min(16),
+                .min(8),
             max_storage_buffer_binding_size: adapter_limits.max_storage_buffer_binding_size,
             max_buffer_size: adapter_limits.max_buffer_size,
             max_compute_workgroup_storage_size: adapter_limits.max_compute_workgroup_storage_size,
@@ -107,8 +113,9 @@ impl GpuContext {
         }))
         .map_err(|e| GpuError::Device(e.to_string()))?;
         let adapter_info = adapter.get_info();
-        let list_cols = if !subgroups
-            || (adapter_info.subgroup_max_size <= 8 && adapter_info.subgroup_min_size >= 1)
+        let list_cols = if !opts.wide_lists
+            && (!subgroups
+                || (adapter_info.subgroup_max_size <= 8 && adapter_info.subgroup_min_size >= 1))
         {
             8
         } else {

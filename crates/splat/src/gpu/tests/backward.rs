@@ -2,7 +2,7 @@
 //! gradient, on both the float-atomic and the compare-and-swap paths.
 
 use super::scenes::{camera, random_splats};
-use super::{ctx, ctx_cas};
+use super::{ctx, ctx_cas, ctx_wide_lists};
 use crate::gpu::GpuContext;
 use crate::gpu::backward::{
     BackwardArgs, BackwardKernels, projected_grads_buffer, read_grads, read_projected_grads,
@@ -173,5 +173,12 @@ fn backward_matches_reference_float_atomics() {
 fn backward_matches_reference_cas_atomics() {
     let Some(c) = ctx_cas() else { return };
     assert!(!c.float_atomics);
+    run(c);
+}
+
+#[test]
+fn backward_matches_reference_wide_lists() {
+    let Some(c) = ctx_wide_lists() else { return };
+    assert_eq!(c.list_cols, 16);
     run(c);
 }

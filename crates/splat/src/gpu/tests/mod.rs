@@ -32,6 +32,7 @@ pub(crate) fn ctx() -> Option<&'static GpuContext> {
             force_cas_atomics: false,
             no_subgroups: false,
             timestamps: true,
+            wide_lists: false,
         })
     })
     .as_ref()
@@ -46,6 +47,22 @@ pub(crate) fn ctx_cas() -> Option<&'static GpuContext> {
             force_cas_atomics: true,
             no_subgroups: true,
             timestamps: false,
+            wide_lists: false,
+        })
+    })
+    .as_ref()
+}
+
+/// Shared context with subgroups on but one `rasterize_backward` splat list
+/// per tile (the path adapters with subgroups wider than 8 lanes take).
+pub(crate) fn ctx_wide_lists() -> Option<&'static GpuContext> {
+    static C: OnceLock<Option<GpuContext>> = OnceLock::new();
+    C.get_or_init(|| {
+        open(&GpuOptions {
+            force_cas_atomics: false,
+            no_subgroups: false,
+            timestamps: false,
+            wide_lists: true,
         })
     })
     .as_ref()
