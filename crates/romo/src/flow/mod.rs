@@ -6,7 +6,9 @@
 //! paper's RAFT can be plugged in through ONNX (feature `onnx`).
 
 pub mod dis;
+mod patch;
 pub mod pyramid;
+mod sor;
 pub mod variational;
 
 use crate::plane::Plane;
