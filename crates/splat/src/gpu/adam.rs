@@ -19,7 +19,9 @@ pub struct AdamUniforms {
     pub stride: u32,
     /// Leading elements of each stride using `lr_head` (3 = the SH DC of r, g, b).
     pub head: u32,
-    pub pad: u32,
+    /// Sparse update: elements per splat, and only splats with radius > 0
+    /// in `AdamArgs::visible` are updated (parameter and moments); 0 = dense.
+    pub sparse_width: u32,
     pub lr: f32,
     pub lr_head: f32,
     pub beta1: f32,
@@ -62,6 +64,11 @@ pub static DECL: KernelDecl = KernelDecl {
             binding: 4,
             kind: BindingKind::StorageRw,
         },
+        BindingDecl {
+            name: "projected",
+            binding: 5,
+            kind: BindingKind::StorageRead,
+        },
     ],
     uniform: Some(("AdamUniforms", std::mem::size_of::<AdamUniforms>())),
     uses_grad_atomics: false,
@@ -73,6 +80,9 @@ pub struct AdamArgs<'a> {
     pub grads: &'a wgpu::Buffer,
     pub exp_avg: &'a wgpu::Buffer,
     pub exp_avg_sq: &'a wgpu::Buffer,
+    /// This step's projected splats (radius > 0 = visible); read only when
+    /// `uniforms.sparse_width > 0`.
+    pub visible: &'a wgpu::Buffer,
     pub uniforms: AdamUniforms,
 }
 
@@ -106,6 +116,7 @@ impl Adam {
                 ("grads", a.grads),
                 ("exp_avg", a.exp_avg),
                 ("exp_avg_sq", a.exp_avg_sq),
+                ("projected", a.visible),
             ],
         )?;
         rec.dispatch(

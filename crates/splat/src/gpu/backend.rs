@@ -71,6 +71,12 @@ pub struct GpuBackend {
     pub adam_config: AdamConfig,
     /// Record per-dispatch timestamps in the next steps (see [`GpuBackend::last_timings`]).
     pub profile: bool,
+    /// Sparse ("selective") Adam, as gsplat's `SelectiveAdam` / Brush: only
+    /// splats visible in the step's view (radius > 0) update their
+    /// parameters and moments. Default off = dense torch Adam, which the CPU
+    /// reference implements; on, invisible splats keep their moments instead
+    /// of decaying them and do not coast on momentum.
+    pub sparse_adam: bool,
     timings: Timings,
     /// (tile, splat) pairs of the last step's render.
     intersections: u32,
@@ -102,6 +108,7 @@ impl GpuBackend {
             views: HashMap::new(),
             adam_config: AdamConfig::default(),
             profile: false,
+            sparse_adam: false,
             timings: Vec::new(),
             intersections: 0,
         })
@@ -298,7 +305,7 @@ impl TrainBackend for GpuBackend {
         // MCMC regularisers' gradients (nothing recorded when zero).
         self.mcmc
             .record_reg(ctx, &mut rec, &st.params, &st.grads, &self.reg)?;
-        // Adam, every group (dense, as torch).
+        // Adam, every group (dense, as torch, unless `sparse_adam`).
         st.step += 1;
         let c = &self.adam_config;
         let t = st.step.min(i32::MAX as u64) as i32;
@@ -306,7 +313,7 @@ impl TrainBackend for GpuBackend {
             n: 0,
             stride: 0,
             head: 0,
-            pad: 0,
+            sparse_width: 0,
             lr: 0.0,
             lr_head: 0.0,
             beta1: c.beta1,
@@ -372,10 +379,12 @@ impl TrainBackend for GpuBackend {
             ),
         ];
         for (p, g, m, v, count, lr_rest, lr_head, stride) in groups {
+            let width = count.checked_div(n).unwrap_or(0);
             let uniforms = AdamUniforms {
                 n: count,
                 stride,
                 head: 3,
+                sparse_width: if self.sparse_adam { width } else { 0 },
                 lr: lr_rest,
                 lr_head,
                 ..base
@@ -388,6 +397,7 @@ impl TrainBackend for GpuBackend {
                     grads: g,
                     exp_avg: m,
                     exp_avg_sq: v,
+                    visible: &fs.projected,
                     uniforms,
                 },
             )?;

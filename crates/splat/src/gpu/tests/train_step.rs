@@ -21,6 +21,7 @@ fn adam_kernel_matches_cpu_formula() {
     let mut m = vec![0.0f32; n];
     let mut v = vec![0.0f32; n];
     let (pb, mb, vb) = (c.upload("p", &p), c.upload("m", &m), c.upload("v", &v));
+    let dummy = c.storage("visible", 48);
     let cfg = AdamConfig::default();
     for t in 1..=4i32 {
         let mut g: Vec<f32> = (0..n).map(|_| r.random_range(-1.0f32..1.0)).collect();
@@ -33,7 +34,7 @@ fn adam_kernel_matches_cpu_formula() {
             n: n as u32,
             stride: 10,
             head: 3,
-            pad: 0,
+            sparse_width: 0,
             lr,
             lr_head,
             beta1: cfg.beta1,
@@ -52,6 +53,7 @@ fn adam_kernel_matches_cpu_formula() {
                 grads: &gb,
                 exp_avg: &mb,
                 exp_avg_sq: &vb,
+                visible: &dummy, // not read when dense
                 uniforms,
             },
         )
@@ -72,6 +74,79 @@ fn adam_kernel_matches_cpu_formula() {
                 gp[k],
                 p[k]
             );
+        }
+    }
+}
+
+/// Sparse Adam: elements of splats with radius 0 in `visible` keep their
+/// parameter and both moments; the others follow the dense formula.
+#[test]
+fn sparse_adam_updates_only_visible_splats() {
+    let Some(c) = ctx() else { return };
+    let adam = Adam::new(c);
+    let mut r = rand_pcg::Pcg64::seed_from_u64(19);
+    let (splats, width) = (700usize, 3usize);
+    let n = splats * width;
+    let p0: Vec<f32> = (0..n).map(|_| r.random_range(-1.0f32..1.0)).collect();
+    let m0: Vec<f32> = (0..n).map(|_| r.random_range(-0.1f32..0.1)).collect();
+    let v0: Vec<f32> = (0..n).map(|_| r.random_range(0.0f32..0.1)).collect();
+    let g: Vec<f32> = (0..n).map(|_| r.random_range(-1.0f32..1.0)).collect();
+    let vis: Vec<bool> = (0..splats).map(|i| i % 3 != 1).collect();
+    let proj: Vec<crate::types::ProjectedSplat> = vis
+        .iter()
+        .map(|&v| crate::types::ProjectedSplat {
+            radius: if v { 4.0 } else { 0.0 },
+            ..Default::default()
+        })
+        .collect();
+    let (pb, mb, vb) = (c.upload("p", &p0), c.upload("m", &m0), c.upload("v", &v0));
+    let (gb, visb) = (c.upload("g", &g), c.upload("proj", &proj));
+    let cfg = AdamConfig::default();
+    let (bc1, sbc2) = (1.0 - cfg.beta1, (1.0 - cfg.beta2).sqrt());
+    let lr = 0.01f32;
+    let mut rec = Recorder::new(c, false);
+    adam.dispatch(
+        c,
+        &mut rec,
+        &AdamArgs {
+            params: &pb,
+            grads: &gb,
+            exp_avg: &mb,
+            exp_avg_sq: &vb,
+            visible: &visb,
+            uniforms: AdamUniforms {
+                n: n as u32,
+                stride: 0,
+                head: 0,
+                sparse_width: width as u32,
+                lr,
+                lr_head: lr,
+                beta1: cfg.beta1,
+                beta2: cfg.beta2,
+                bc1,
+                sbc2,
+                eps: cfg.eps,
+                pad2: 0.0,
+            },
+        },
+    )
+    .unwrap();
+    rec.finish().unwrap();
+    let (gp, gm, gv): (Vec<f32>, Vec<f32>, Vec<f32>) = (
+        c.read(&pb, n).unwrap(),
+        c.read(&mb, n).unwrap(),
+        c.read(&vb, n).unwrap(),
+    );
+    for k in 0..n {
+        if vis[k / width] {
+            let m = cfg.beta1 * m0[k] + (1.0 - cfg.beta1) * g[k];
+            let v = cfg.beta2 * v0[k] + (1.0 - cfg.beta2) * g[k] * g[k];
+            let p = p0[k] - lr / bc1 * m / (v.sqrt() / sbc2 + cfg.eps);
+            assert!((gm[k] - m).abs() <= 1e-7, "m[{k}]");
+            assert!((gv[k] - v).abs() <= 1e-7, "v[{k}]");
+            assert!((gp[k] - p).abs() <= 1e-6, "p[{k}]: {} vs {p}", gp[k]);
+        } else {
+            assert_eq!((gp[k], gm[k], gv[k]), (p0[k], m0[k], v0[k]), "element {k}");
         }
     }
 }
@@ -273,4 +348,76 @@ fn reused_buffers_give_the_same_step() {
     // Adam's first step is ±lr·sign(g): a gradient summed in another order
     // can flip sign only where it is ~0, so nearly every element agrees.
     assert!(moved * 100 <= a.len(), "{moved} of {} differ", a.len());
+}
+
+/// `GpuBackend::sparse_adam`: a splat outside the view keeps its parameters
+/// and moments (every group, SH included); dense Adam moves it on momentum.
+#[test]
+fn sparse_adam_backend_leaves_invisible_splats() {
+    if ctx().is_none() {
+        return;
+    }
+    let cam = camera(64, 48);
+    let mut s = random_splats(200, 1, 81, false);
+    s.means[5] = [500.0, 0.0, 3.0]; // far off-screen: culled
+    let mut adam = AdamState::zeros_like(&s);
+    let mut r = rand_pcg::Pcg64::seed_from_u64(82);
+    for m in [&mut adam.m, &mut adam.v] {
+        for x in m.means.iter_mut().flatten() {
+            *x = r.random_range(0.01f32..0.1);
+        }
+        for x in m.sh.iter_mut() {
+            *x = r.random_range(0.01f32..0.1);
+        }
+        for x in m.opacity_logits.iter_mut() {
+            *x = r.random_range(0.01f32..0.1);
+        }
+    }
+    adam.step = 3;
+    let target: Vec<f32> = (0..64 * 48 * 3)
+        .map(|_| r.random_range(0.0f32..1.0))
+        .collect();
+    let input = StepInput {
+        camera: &cam,
+        target: &target,
+        mask: None,
+        view_id: None,
+        lr: LearningRates {
+            means: 1e-3,
+            sh_dc: 2.5e-3,
+            sh_rest: 1.25e-4,
+            opacity: 0.05,
+            scales: 5e-3,
+            rotations: 1e-3,
+        },
+        loss: LossConfig { ssim_weight: 0.0 },
+        render: RenderOptions {
+            sh_degree: 1,
+            ..Default::default()
+        },
+    };
+    let k3 = s.sh.len() / s.len();
+    let run = |sparse: bool| {
+        let mut b = GpuBackend::new(&crate::gpu::GpuOptions::default()).unwrap();
+        b.sparse_adam = sparse;
+        b.upload(&s, &adam).unwrap();
+        b.step(&input).unwrap();
+        let (p, a, _) = b.download().unwrap();
+        (p, a)
+    };
+    let (sp, sa) = run(true);
+    assert_eq!(sp.means[5], s.means[5]);
+    assert_eq!(sp.sh[5 * k3..6 * k3], s.sh[5 * k3..6 * k3]);
+    assert_eq!(sp.opacity_logits[5], s.opacity_logits[5]);
+    assert_eq!(sa.m.means[5], adam.m.means[5]);
+    assert_eq!(sa.v.sh[5 * k3..6 * k3], adam.v.sh[5 * k3..6 * k3]);
+    let (dp, da) = run(false);
+    assert_ne!(dp.means[5], s.means[5], "dense Adam coasts on momentum");
+    assert_ne!(da.m.means[5], adam.m.means[5], "dense Adam decays moments");
+    // Visible splats get the same update either way.
+    let visible_same = (0..s.len())
+        .filter(|&i| i != 5)
+        .filter(|&i| sp.opacity_logits[i] == dp.opacity_logits[i])
+        .count();
+    assert!(visible_same * 10 >= (s.len() - 1) * 7, "{visible_same}");
 }
