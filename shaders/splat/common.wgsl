@@ -21,7 +21,7 @@ struct ProjectedSplat {
     color_g: f32,
     color_b: f32,
     // Tile-binning half extents in pixels, x in the low 16 bits, y in the
-    // high 16 (`ProjectedSplat::_pad` on the Rust side; see `tile_extent`).
+    // high 16 (`ProjectedSplat::tile_extent` on the Rust side; see `tile_extent`).
     extent: u32,
 }
 

@@ -41,7 +41,7 @@ fn main() {
         let area = |r: Option<[u32; 4]>| r.map_or(0, |r| ((r[2] - r[0]) * (r[3] - r[1])) as u64);
         for p in &proj {
             circle += area(tile_rect(p.mean2d, p.radius, [p.radius; 2], grid));
-            let e = splat::reference::project::unpack_extent(p._pad);
+            let e = splat::reference::project::unpack_extent(p.tile_extent);
             let rect = tile_rect(p.mean2d, p.radius, e, grid);
             tight += area(rect);
             let Some(r) = rect else { continue };

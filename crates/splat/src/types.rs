@@ -158,8 +158,10 @@ pub struct ProjectedSplat {
     pub opacity: f32,
     /// View-dependent RGB colour (clamped at 0 from below, as INRIA).
     pub color: [f32; 3],
-    /// Padding to 48 bytes.
-    pub _pad: f32,
+    /// Opacity-aware tile-binning half extents in pixels, x in the low 16
+    /// bits and y in the high 16 (`reference::project::pack_extent`; read by
+    /// `common.wgsl`); 0 = no tiles. Keeps the struct at 48 bytes.
+    pub tile_extent: u32,
 }
 
 /// Output of a forward render.

@@ -71,7 +71,7 @@ fn isotropic_known_answer() {
 /// and never smaller than the 3σ circle's bounding box would allow to be
 /// dropped: both ≤ the circular radius.
 fn extent_of(s: &ProjectedSplat) -> [f32; 2] {
-    let bits = s._pad.to_bits();
+    let bits = s.tile_extent;
     let e = [(bits & 0xffff) as f32, (bits >> 16) as f32];
     let [a, b, c] = s.conic.map(|v| v as f64);
     let det = a * c - b * b;

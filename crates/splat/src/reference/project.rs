@@ -12,7 +12,7 @@
 //! within Mahalanobis distance sqrt(2·ln(255·o)), so with
 //! k = min(3, sqrt(2·ln(255·o))) the extents are ceil(k·sqrt(Σ'ₓₓ)) and
 //! ceil(k·sqrt(Σ'ᵧᵧ)) pixels (0, no tiles, when 255·o ≤ 1), at most
-//! [`MAX_EXTENT`]; they travel packed in `ProjectedSplat::_pad` ([`pack_extent`]);
+//! [`MAX_EXTENT`]; they travel packed in `ProjectedSplat::tile_extent` ([`pack_extent`]);
 //! colour from SH (+0.5, clamped at 0); opacity = sigmoid(logit), times
 //! sqrt(max(0, det(Σ'−low_pass·I)/det(Σ'))) in antialiased mode (Mip-Splatting
 //! / gsplat). Pixel centres are at integer + 0.5, so mean2d = f·x/z + c.
@@ -44,20 +44,19 @@ pub struct ProjectedT<T> {
     pub extent: [T; 2],
 }
 
-/// Largest tile extent in pixels: keeps the packed pair a finite f32 bit
-/// pattern (high half ≤ 0x7f7f).
+/// Largest tile extent in pixels (far beyond any image; the packed pair
+/// also stays a finite f32 bit pattern, as it was when the field was f32).
 pub const MAX_EXTENT: u32 = 0x7f7f;
 
-/// Pack per-axis tile extents into the bits of `ProjectedSplat::_pad`
+/// Pack per-axis tile extents into `ProjectedSplat::tile_extent`
 /// (x in the low 16 bits, y in the high 16 bits), as `common.wgsl` reads them.
-pub fn pack_extent(e: [f32; 2]) -> f32 {
+pub fn pack_extent(e: [f32; 2]) -> u32 {
     let c = |v: f32| (v.max(0.0) as u32).min(MAX_EXTENT);
-    f32::from_bits(c(e[0]) | (c(e[1]) << 16))
+    c(e[0]) | (c(e[1]) << 16)
 }
 
 /// Inverse of [`pack_extent`].
-pub fn unpack_extent(bits: f32) -> [f32; 2] {
-    let b = bits.to_bits();
+pub fn unpack_extent(b: u32) -> [f32; 2] {
     [(b & 0xffff) as f32, (b >> 16) as f32]
 }
 
@@ -84,7 +83,7 @@ impl From<ProjectedT<f32>> for ProjectedSplat {
             conic: p.conic,
             opacity: p.opacity,
             color: p.color,
-            _pad: pack_extent(p.extent),
+            tile_extent: pack_extent(p.extent),
         }
     }
 }
@@ -98,7 +97,7 @@ impl From<&ProjectedSplat> for ProjectedT<f32> {
             conic: p.conic,
             opacity: p.opacity,
             color: p.color,
-            extent: unpack_extent(p._pad),
+            extent: unpack_extent(p.tile_extent),
         }
     }
 }
