@@ -1,7 +1,8 @@
 //! Benchmark: per-kernel GPU times of a training step on a real scene's
 //! first view with its initial splats (no densification), for tuning the
-//! kernels on a shared machine: prints, per kernel, the median and the
-//! minimum ms over the steps (the minimum is the least load-sensitive).
+//! kernels on a shared machine: prints, per kernel, the median ms over the
+//! steps (`splat::gpu::profile_step`, as `romosplat bench train --profile`,
+//! which this adds a trained-PLY input to; `count:intersections` included).
 //! Scene: `STEP_BENCH_SCENE` (default `../shared/data/fox` from the repo
 //! root), `STEP_BENCH_DOWNSCALE` (default 4), `STEP_BENCH_STEPS` (default 5);
 //! `STEP_BENCH_PLY` trains splats from a PLY (e.g. a trained scene) instead
@@ -10,12 +11,11 @@
 #![allow(clippy::unwrap_used, clippy::expect_used)]
 
 use loader::scene::{Scene, SceneOptions};
-use splat::backend::{LossConfig, StepInput, TrainBackend};
-use splat::gpu::{GpuBackend, GpuOptions};
+use splat::backend::{LossConfig, StepInput};
+use splat::gpu::profile_step;
 use splat::train::TrainOptions;
 use splat::train::data::{initial_splats, load_views, scene_extent};
-use splat::types::{AdamState, RenderOptions};
-use std::collections::BTreeMap;
+use splat::types::RenderOptions;
 
 fn env_or<T: std::str::FromStr>(k: &str, d: T) -> T {
     std::env::var(k)
@@ -39,12 +39,6 @@ fn main() {
         Ok(p) => splat::io::read_ply(p).unwrap(),
         Err(_) => initial_splats(&scene, &cams, extent, &opts).unwrap().0,
     };
-    let mut b = GpuBackend::new(&GpuOptions {
-        timestamps: true,
-        ..Default::default()
-    })
-    .unwrap();
-    b.upload(&splats, &AdamState::zeros_like(&splats)).unwrap();
     let v = &views[0];
     let input = StepInput {
         camera: &v.camera,
@@ -58,38 +52,12 @@ fn main() {
             ..Default::default()
         },
     };
-    b.step(&input).unwrap();
-    b.profile = true;
-    let mut per: BTreeMap<&'static str, Vec<f64>> = BTreeMap::new();
-    for _ in 0..steps {
-        let t0 = std::time::Instant::now();
-        b.step(&input).unwrap();
-        let wall = t0.elapsed().as_secs_f64() * 1e3;
-        let mut this: BTreeMap<&'static str, f64> = BTreeMap::new();
-        for (name, ms) in b.last_timings() {
-            *this.entry(name).or_insert(0.0) += ms;
-        }
-        this.insert("step_wall", wall);
-        for (k, ms) in this {
-            per.entry(k).or_default().push(ms);
-        }
-    }
-    let mut out = serde_json::Map::new();
-    for (k, mut v) in per {
-        v.sort_by(f64::total_cmp);
-        let r = |x: f64| (x * 10.0).round() / 10.0;
-        out.insert(
-            k.to_string(),
-            serde_json::json!({ "median": r(v[v.len() / 2]), "min": r(v[0]) }),
-        );
-    }
+    let prof = profile_step(&splats, &input, 1, steps).unwrap();
+    let r = |x: f64| (x * 10.0).round() / 10.0;
+    let ms: serde_json::Map<String, serde_json::Value> =
+        prof.into_iter().map(|(k, v)| (k, r(v).into())).collect();
     println!(
         "{}",
-        serde_json::json!({
-            "scene": root,
-            "splats": splats.len(),
-            "intersections": b.last_intersections(),
-            "ms": out,
-        })
+        serde_json::json!({ "scene": root, "splats": splats.len(), "ms": ms })
     );
 }
