@@ -6,6 +6,20 @@
 use crate::gpu::kernel::{BindingKind, shader_source};
 use naga::{AddressSpace, StorageAccess, TypeInner};
 
+/// Parse WGSL with naga and validate it with every capability; panics
+/// naming `what` on either failure.
+fn parse_and_validate(what: &str, src: &str) -> naga::Module {
+    let module = naga::front::wgsl::parse_str(src)
+        .unwrap_or_else(|e| panic!("{what}: {}", e.emit_to_string(src)));
+    naga::valid::Validator::new(
+        naga::valid::ValidationFlags::all(),
+        naga::valid::Capabilities::all(),
+    )
+    .validate(&module)
+    .unwrap_or_else(|e| panic!("{what}: {e:?}"));
+    module
+}
+
 #[test]
 fn shaders_match_host_binding_tables() {
     assert!(!crate::gpu::ALL_KERNELS.is_empty());
@@ -17,19 +31,11 @@ fn shaders_match_host_binding_tables() {
         };
         for (&float_atomics, subgroups) in variants.iter().flat_map(|a| [(a, false), (a, true)]) {
             let src = shader_source(decl, float_atomics, subgroups);
-            let module = naga::front::wgsl::parse_str(&src)
-                .unwrap_or_else(|e| panic!("{}: {}", decl.name, e.emit_to_string(&src)));
-            naga::valid::Validator::new(
-                naga::valid::ValidationFlags::all(),
-                naga::valid::Capabilities::all(),
-            )
-            .validate(&module)
-            .unwrap_or_else(|e| {
-                panic!(
-                    "{} (float_atomics={float_atomics}, subgroups={subgroups}): {e:?}",
-                    decl.name
-                )
-            });
+            let what = format!(
+                "{} (float_atomics={float_atomics}, subgroups={subgroups})",
+                decl.name
+            );
+            let module = parse_and_validate(&what, &src);
             let mut seen = Vec::new();
             for (_, var) in module.global_variables.iter() {
                 let Some(rb) = &var.binding else { continue };
@@ -146,14 +152,7 @@ fn wide_subgroup_list_variant_validates() {
     {
         for float_atomics in [true, false] {
             let src = crate::gpu::kernel::shader_source_cols(decl, float_atomics, true, 16);
-            let module = naga::front::wgsl::parse_str(&src)
-                .unwrap_or_else(|e| panic!("{}: {}", decl.name, e.emit_to_string(&src)));
-            naga::valid::Validator::new(
-                naga::valid::ValidationFlags::all(),
-                naga::valid::Capabilities::all(),
-            )
-            .validate(&module)
-            .unwrap_or_else(|e| panic!("{}: {e:?}", decl.name));
+            parse_and_validate(decl.name, &src);
         }
     }
 }
