@@ -115,6 +115,12 @@ pub struct Args {
     /// Default strategy: reset opacities every N steps (INRIA 3000; 0 = never).
     #[arg(long, default_value_t = splat::strategy::DefaultStrategyOptions::default().opacity_reset_every)]
     pub opacity_reset_every: u32,
+    /// Default strategy: after the first opacity reset, prune splats wider
+    /// than this many pixels on screen (INRIA 20; 0 = off, the default, as
+    /// gsplat: at low resolution the 20 px rule removes the large splats
+    /// that carry the background).
+    #[arg(long, default_value_t = splat::strategy::DefaultStrategyOptions::default().prune_screen_px)]
+    pub prune_screen_px: f32,
     /// Raise the active SH degree by one every N steps (INRIA 1000).
     #[arg(long, default_value_t = TrainOptions::default().sh_degree_every)]
     pub sh_degree_every: u32,
@@ -231,6 +237,7 @@ pub fn run(args: &Args, ctx: &Ctx) -> anyhow::Result<serde_json::Value> {
             densify_every: args.densify_every,
             grad_threshold: args.grad_threshold,
             opacity_reset_every: args.opacity_reset_every,
+            prune_screen_px: args.prune_screen_px,
             ..Default::default()
         },
         strategy_kind: match args.strategy {

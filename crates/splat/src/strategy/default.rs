@@ -4,10 +4,19 @@
 //! reaches 2e-4 are cloned when small (max scale ≤ 1% of the scene extent)
 //! or split into 2 samples drawn from the splat, each with scale / 1.6, when
 //! large; then splats with opacity < 0.005 are pruned, and after the first
-//! opacity reset also those wider than 20 px on screen or 0.1 × extent in the
-//! world. Every 3000 steps (while densifying) opacities are reset to at most
-//! 0.01. A cap bounds the splat count: when densifying would exceed it, the
-//! candidates with the largest gradients win.
+//! opacity reset also those larger than 0.1 × extent in the world (and,
+//! when `prune_screen_px` > 0, those wider than that on screen). Every 3000
+//! steps (while densifying) opacities are reset to at most 0.01. A cap
+//! bounds the splat count: when densifying would exceed it, the candidates
+//! with the largest gradients win.
+//!
+//! Screen-size pruning is off by default, as in gsplat's default strategy
+//! (`refine_scale2d_stop_iter = 0`), not INRIA's 20 px: measured on fox at
+//! 270×480 with random init, the step-1795 model had 23% of its splats
+//! wider than 20 px in some training view and removing them dropped its
+//! held-out PSNR from 27.2 to 8.2 dB; the 20 px rule pruned that backbone
+//! every 100 steps from step 3100 on, and the 7000-step model ended at
+//! 24.7 dB, below the step-1795 one. `prune_screen_px = 20` restores INRIA.
 
 use super::{
     ModelState, RefineReport, SceneInfo, Strategy, logit, push_splat, retain, rotation, sigmoid,
@@ -33,8 +42,10 @@ pub struct DefaultStrategyOptions {
     pub split_count: u32,
     /// Prune below this opacity (0.005).
     pub prune_opacity: f32,
-    /// Prune wider than this on screen, in pixels, after the first opacity
-    /// reset (INRIA `size_threshold`, 20).
+    /// Prune splats whose 3σ screen radius exceeded this many pixels in a
+    /// view since the last refinement, after the first opacity reset
+    /// (INRIA `size_threshold` 20; default 0 = off, as gsplat — see the
+    /// module note for the measurement).
     pub prune_screen_px: f32,
     /// Prune larger than this fraction of the extent in the world (0.1).
     pub prune_world_fraction: f32,
@@ -56,7 +67,7 @@ impl Default for DefaultStrategyOptions {
             percent_dense: 0.01,
             split_count: 2,
             prune_opacity: 0.005,
-            prune_screen_px: 20.0,
+            prune_screen_px: 0.0,
             prune_world_fraction: 0.1,
             opacity_reset_every: 3000,
             opacity_reset_value: 0.01,
@@ -82,6 +93,9 @@ impl DefaultStrategyOptions {
             || !(0.0..1.0).contains(&self.opacity_reset_value)
         {
             return bad("opacities must be in [0, 1)");
+        }
+        if !(self.prune_screen_px.is_finite() && self.prune_screen_px >= 0.0) {
+            return bad("prune_screen_px must be >= 0 (0 = off)");
         }
         if self.max_splats == 0 {
             return bad("max_splats must be > 0");
@@ -132,7 +146,7 @@ impl Strategy for DefaultStrategy {
         let mut rep = RefineReport::default();
         if self.densifying(step) && step > o.densify_from && step.is_multiple_of(o.densify_every) {
             let size_threshold = (o.opacity_reset_every > 0 && step > o.opacity_reset_every)
-                .then_some(o.prune_screen_px);
+                .then_some((o.prune_screen_px > 0.0).then_some(o.prune_screen_px));
             densify_and_prune(state, &o, scene, size_threshold, seed, &mut rep);
         }
         if self.densifying(step)
@@ -163,7 +177,7 @@ fn densify_and_prune(
     state: &mut ModelState,
     o: &DefaultStrategyOptions,
     scene: &SceneInfo,
-    size_threshold: Option<f32>,
+    size_threshold: Option<Option<f32>>,
     seed: u64,
     rep: &mut RefineReport,
 ) {
@@ -249,8 +263,10 @@ fn densify_and_prune(
         let op = sigmoid(s.opacity_logits[i]);
         let mut bad =
             op.is_nan() || op < o.prune_opacity || !s.means[i].iter().all(|v| v.is_finite());
-        if let Some(px) = size_threshold {
-            let big_screen = state.stats.max_radius.get(i).is_some_and(|&m| m > px);
+        // After the first reset: oversized in the world, and (when on) on screen.
+        if let Some(screen) = size_threshold {
+            let big_screen =
+                screen.is_some_and(|px| state.stats.max_radius.get(i).is_some_and(|&m| m > px));
             bad |= big_screen || max_scale(&s.log_scales[i]) > world;
         }
         if bad && !*r {
@@ -271,3 +287,7 @@ mod rand_distr_normal {
         ((-2.0 * u1.ln()).sqrt() * (std::f64::consts::TAU * u2).cos()) as f32
     }
 }
+
+#[cfg(test)]
+#[path = "default_tests.rs"]
+mod tests;
