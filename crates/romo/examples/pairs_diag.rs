@@ -73,7 +73,8 @@ fn main() {
             let fit = |sel| {
                 let mut lo = opts.labels.clone();
                 lo.robust.selection = sel;
-                romo::labels::fit_pair(&fwd, &valid, &lo, 7).unwrap()
+                let r = romo::labels::fit_pair(&fwd, &valid, &lo, 7, None).unwrap();
+                (r.model, r.report)
             };
             let (mf, _) = fit(ModelSelection::Fundamental);
             let (mh, _) = fit(ModelSelection::Homography);

@@ -10,9 +10,15 @@
 //! the working grid; the comparison is unit-consistent and invariant to the
 //! working resolution. (With px², `S > 2v` compares px² to px and its
 //! meaning changes with image scale.)
+//!
+//! With `cheirality` on (ours), S of a pair scored by F is
+//! `max(Sampson, cheirality violation)` (see [`crate::geometry::oriented`]):
+//! motion along the epipolar line that only a point behind the cameras
+//! could make counts as motion too.
 
 use crate::flow::Flow;
 use crate::geometry::Pt;
+use crate::geometry::oriented::{Oriented, VoteOptions, intrinsics};
 use crate::geometry::robust::{
     FitReport, ModelSelection, RobustOptions, TwoView, fit_two_view_all,
 };
@@ -67,6 +73,12 @@ pub struct LabelOptions {
     /// lines) then keep U, and lose the wrong L, in the frames between.
     /// 0 disables. Default: see README.
     pub u_propagation_frames: usize,
+    /// Cheirality test (ours): in pairs scored by F, a correspondence whose
+    /// triangulation lies behind either camera is scored by its parallax
+    /// when that exceeds its Sampson distance (see
+    /// [`crate::geometry::oriented`]; needs a focal length, from the scene
+    /// or guessed). Default: see README.
+    pub cheirality: bool,
     /// Robust estimation and model selection.
     pub robust: RobustOptions,
 }
@@ -82,6 +94,7 @@ impl Default for LabelOptions {
             fit_points: 2000,
             f_informative_fraction: 0.005,
             u_propagation_frames: 0,
+            cheirality: true,
             robust: RobustOptions::default(),
         }
     }
@@ -125,14 +138,9 @@ pub fn cycle_valid(f: &Flow, b: &Flow, o: &LabelOptions) -> Vec<bool> {
         .collect()
 }
 
-/// Fit one pair's model on correspondences `x ↔ x + f(x)` at pixels where
-/// `usable`, spread over a grid (`fit_points` cells, one random pixel each).
-pub fn fit_pair(
-    f: &Flow,
-    usable: &[bool],
-    o: &LabelOptions,
-    seed: u64,
-) -> crate::Result<(TwoView, FitReport)> {
+/// Correspondences `x ↔ x + f(x)` at pixels where `usable`, spread over a
+/// grid (`fit_points` cells, one random pixel each, seeded).
+pub fn fit_points(f: &Flow, usable: &[bool], o: &LabelOptions, seed: u64) -> (Vec<Pt>, Vec<Pt>) {
     let (w, h) = (f.w(), f.h());
     let cell = ((w * h) as f64 / o.fit_points as f64).sqrt().max(1.0) as usize;
     let mut rng = rand_pcg::Pcg64::seed_from_u64(seed);
@@ -155,12 +163,45 @@ pub fn fit_pair(
             }
         }
     }
+    (a, b)
+}
+
+/// A pair's fitted model, its report and (for F with `cheirality` on) its
+/// metric geometry.
+#[derive(Debug, Clone)]
+pub struct PairFit {
+    pub model: TwoView,
+    pub report: FitReport,
+    /// The decomposed F for the cheirality test, when decided.
+    pub oriented: Option<Oriented>,
+}
+
+/// Fit one pair's model on the [`fit_points`] of `f` where `usable`.
+/// `focal_px` is the focal length at the flow's grid (principal point at
+/// the grid centre), for the cheirality test; None skips it.
+pub fn fit_pair(
+    f: &Flow,
+    usable: &[bool],
+    o: &LabelOptions,
+    seed: u64,
+    focal_px: Option<f64>,
+) -> crate::Result<PairFit> {
+    let (a, b) = fit_points(f, usable, o, seed);
     let fits = fit_two_view_all(&a, &b, &o.robust)?;
-    let thr = (o.u_factor * f.mean_magnitude()) as f64;
+    let v = f.mean_magnitude() as f64;
+    let oriented = focal_px
+        .filter(|_| o.cheirality)
+        .and_then(|fp| orient(&fits.fundamental, fp, (f.w(), f.h()), &a, &b, o, v));
+    // Moving according to F: Sampson, and the cheirality violation.
+    let residual_f = |p: Pt, q: Pt| {
+        let r = fits.fundamental.residual_px(p, q);
+        oriented.map_or(r, |or| r.max(or.violation_px(p, q)))
+    };
+    let thr = o.u_factor as f64 * v;
     let nu = a
         .iter()
         .zip(&b)
-        .filter(|(p, q)| fits.fundamental.residual_px(**p, **q) > thr)
+        .filter(|(p, q)| residual_f(**p, **q) > thr)
         .count();
     let frac = nu as f64 / a.len().max(1) as f64;
     let overrule = o.f_informative_fraction > 0.0
@@ -170,13 +211,48 @@ pub fn fit_pair(
             ModelSelection::Gric | ModelSelection::InlierRatio
         )
         && frac >= o.f_informative_fraction as f64;
-    let (m, mut rep) = if overrule {
+    let (model, mut report) = if overrule {
         (fits.fundamental, fits.fundamental_report)
     } else {
         (fits.chosen, fits.report)
     };
-    rep.u_fraction_f = frac;
-    Ok((m, rep))
+    report.u_fraction_f = frac;
+    let oriented = oriented.filter(|_| matches!(model, TwoView::Fundamental(_)));
+    report.cheirality_support = oriented.map_or(f64::NAN, |o| o.support);
+    Ok(PairFit {
+        model,
+        report,
+        oriented,
+    })
+}
+
+/// Decompose `F` with focal `focal_px` for the cheirality test, decided by
+/// the votes of the fit points F calls static. None when the votes do not
+/// decide (little translation).
+fn orient(
+    fm: &TwoView,
+    focal_px: f64,
+    (w, h): (usize, usize),
+    a: &[Pt],
+    b: &[Pt],
+    o: &LabelOptions,
+    v: f64,
+) -> Option<Oriented> {
+    let TwoView::Fundamental(f) = fm else {
+        return None;
+    };
+    if !(focal_px.is_finite() && focal_px > 0.0) {
+        return None;
+    }
+    let k = intrinsics(focal_px, 0.5 * (w as f64 - 1.0), 0.5 * (h as f64 - 1.0));
+    let thr = o.l_factor.max(0.5 * o.u_factor) as f64 * v;
+    let (a, b): (Vec<Pt>, Vec<Pt>) = a
+        .iter()
+        .zip(b)
+        .filter(|(p, q)| fm.residual_px(**p, **q) < thr)
+        .map(|(p, q)| (*p, *q))
+        .unzip();
+    Oriented::from_fundamental(f, &k, &a, &b, &VoteOptions::default())
 }
 
 /// One side (forward or backward) of a frame's evidence.
@@ -191,6 +267,8 @@ pub struct Side<'a> {
     pub report: &'a FitReport,
     /// True when this frame is the pair's second frame (backward side).
     pub second: bool,
+    /// The pair's metric geometry for the cheirality test, if decided.
+    pub oriented: Option<&'a Oriented>,
 }
 
 /// Labels of one frame.
@@ -241,11 +319,12 @@ pub fn frame_labels(sides: &[Side], o: &LabelOptions) -> FrameLabels {
                     continue;
                 }
                 let q = [x + sd.flow.u.data[i] as f64, y + sd.flow.v.data[i] as f64];
-                let r = if sd.second {
-                    sd.model.residual_px(q, [x, y])
-                } else {
-                    sd.model.residual_px([x, y], q)
-                } as f32;
+                let (p1, p2) = if sd.second { (q, [x, y]) } else { ([x, y], q) };
+                let mut r = sd.model.residual_px(p1, p2);
+                if let Some(or) = sd.oriented {
+                    r = r.max(or.violation_px(p1, p2));
+                }
+                let r = r as f32;
                 if best.is_nan() || r > best {
                     best = r;
                 }
@@ -393,5 +472,96 @@ mod tests {
         assert!(ok[5 * 20 + 3]);
         assert!(!ok[5 * 20 + 10]); // 10 + 2 = 12 lands in the bad region
         assert!(!ok[5 * 20 + 19]); // leaves the frame
+    }
+
+    /// A sideways dolly with a little yaw over a static scene at 3–15 m,
+    /// and a block of pixels on a walker moving the camera's way, faster:
+    /// its flow stays on the epipolar lines. Sampson alone calls it static;
+    /// with the cheirality test it is U, and the static scene stays clear.
+    #[test]
+    fn cheirality_flags_motion_along_epipolar_lines() {
+        use nalgebra::{Matrix3, Vector3};
+        let (w, h, focal) = (96usize, 64usize, 80.0);
+        let k = crate::geometry::oriented::intrinsics(
+            focal,
+            0.5 * (w as f64 - 1.0),
+            0.5 * (h as f64 - 1.0),
+        );
+        let ki = k.try_inverse().unwrap();
+        let a = 0.004f64;
+        let r = Matrix3::new(a.cos(), 0.0, a.sin(), 0.0, 1.0, 0.0, -a.sin(), 0.0, a.cos());
+        let t = Vector3::new(-0.08, 0.0, 0.0);
+        let walker = |x: usize, y: usize| (40..56).contains(&x) && (20..50).contains(&y);
+        let mut flow = Flow {
+            u: Plane::filled(w, h, 0.0),
+            v: Plane::filled(w, h, 0.0),
+        };
+        for y in 0..h {
+            for x in 0..w {
+                let z = if walker(x, y) {
+                    4.0
+                } else {
+                    3.0 + 12.0 * (((x * 7 + y * 13) % 17) as f64 / 16.0)
+                };
+                let p = ki * Vector3::new(x as f64, y as f64, 1.0) * z;
+                let p = if walker(x, y) {
+                    p + Vector3::new(0.16, 0.0, 0.0)
+                } else {
+                    p
+                };
+                let q = k * (r * p + t);
+                flow.u.data[y * w + x] = (q[0] / q[2] - x as f64) as f32;
+                flow.v.data[y * w + x] = (q[1] / q[2] - y as f64) as f32;
+            }
+        }
+        let valid = vec![true; w * h];
+        let o = LabelOptions::default();
+        let count = |fit: &PairFit| {
+            let side = Side {
+                flow: &flow,
+                valid: &valid,
+                model: fit.model,
+                report: &fit.report,
+                second: false,
+                oriented: fit.oriented.as_ref(),
+            };
+            let lab = frame_labels(&[side], &o);
+            let (mut inside, mut outside) = (0, 0);
+            for i in 0..w * h {
+                if lab.u[i] {
+                    if walker(i % w, i / w) {
+                        inside += 1;
+                    } else {
+                        outside += 1;
+                    }
+                }
+            }
+            (inside, outside)
+        };
+        let plain = fit_pair(&flow, &valid, &o, 3, None).unwrap();
+        assert!(plain.oriented.is_none());
+        let (inside, _) = count(&plain);
+        assert!(
+            inside < 16 * 30 / 10,
+            "Sampson alone: {inside} of 480 walker px in U"
+        );
+        let fit = fit_pair(&flow, &valid, &o, 3, Some(focal)).unwrap();
+        assert_eq!(fit.report.model, "F");
+        let or = fit.oriented.expect("decided");
+        // The walker (8% of the pixels, on its epipolar lines) votes against.
+        assert!(or.support > 0.85, "{}", or.support);
+        let (inside, outside) = count(&fit);
+        assert!(inside > 16 * 30 * 9 / 10, "{inside} of 480 walker px in U");
+        assert!(outside < 60, "{outside} static px in U");
+        let off = LabelOptions {
+            cheirality: false,
+            ..Default::default()
+        };
+        assert!(
+            fit_pair(&flow, &valid, &off, 3, Some(focal))
+                .unwrap()
+                .oriented
+                .is_none()
+        );
     }
 }

@@ -9,9 +9,9 @@
 use crate::features::{FeatureExtractor, FeatureMap, standardise};
 use crate::flow::dis::DisOptions;
 use crate::flow::{Flow, FlowEstimator};
-use crate::geometry::robust::{FitReport, ModelSelection, TwoView};
+use crate::geometry::robust::{FitReport, ModelSelection};
 use crate::labels::{
-    FrameLabels, LabelOptions, Side, cycle_valid, fit_pair, frame_labels, propagate_u,
+    FrameLabels, LabelOptions, PairFit, Side, cycle_valid, fit_pair, frame_labels, propagate_u,
 };
 use crate::mlp::{Label, Mlp, MlpOptions, TrainReport, train};
 use crate::plane::{Plane, Rgb};
@@ -65,6 +65,12 @@ pub struct RomoOptions {
     /// larger-scale texture energy (0.488; with chromaticity 0.515 but the
     /// demo scene fell 0.60 → 0.51).
     pub chromaticity_features: bool,
+    /// Focal length of the frames divided by their width, for the
+    /// cheirality test (`labels.cheirality`). None: the scene's intrinsics
+    /// when segmenting a scene folder, else COLMAP's prior 1.2 × the long
+    /// side. Only depth signs are read from it, which a rough value gets
+    /// right.
+    pub focal_ratio: Option<f64>,
     /// Master seed (sub-stages derive theirs from it).
     pub seed: u64,
     /// Output folder for `masks/` etc. (default: the scene folder).
@@ -87,6 +93,7 @@ impl Default for RomoOptions {
             refine: RefineOptions::default(),
             features: FeatureBackend::Hand,
             chromaticity_features: true,
+            focal_ratio: None,
             seed: 0,
             out: None,
             save_probabilities: false,
@@ -102,6 +109,12 @@ impl RomoOptions {
             return Err(RomoError::Options(
                 "romo: grid_max_side >= 16, flow_scale >= 1, iterations >= 1 required".into(),
             ));
+        }
+        if self
+            .focal_ratio
+            .is_some_and(|r| !(r.is_finite() && r > 0.0))
+        {
+            return Err(RomoError::Options("romo: focal_ratio must be > 0".into()));
         }
         self.flow.validate()?;
         self.labels.validate()?;
@@ -222,6 +235,8 @@ struct Prepared {
     valid_b: Vec<Vec<bool>>,
     feats: Vec<Vec<f32>>,
     c: usize,
+    /// Focal length at the working grid (px).
+    grid_focal: f64,
 }
 
 fn prepare(
@@ -238,6 +253,10 @@ fn prepare(
     let first = src.frame(0)?;
     let (gw, gh) = o.grid_size(first.w(), first.h());
     report.grid = (gw, gh);
+    let ratio = o
+        .focal_ratio
+        .unwrap_or(1.2 * first.w().max(first.h()) as f64 / first.w() as f64);
+    let grid_focal = ratio * gw as f64;
     let (fw, fh) = (gw * o.flow_scale, gh * o.flow_scale);
     progress("load", 0, n);
     let small: Vec<Rgb> = t.time("load", || {
@@ -302,23 +321,24 @@ fn prepare(
         valid_b,
         feats,
         c,
+        grid_focal,
     })
 }
 
 /// Labels of every frame and the fit of every pair in one round.
-type RoundLabels = (Vec<FrameLabels>, Vec<(TwoView, FitReport)>);
+type RoundLabels = (Vec<FrameLabels>, Vec<PairFit>);
 
 /// Fit every pair (excluding pixels in `moving`, per frame) and label every
 /// frame.
 fn label_round(
     pr: &Prepared,
     moving: Option<&[Vec<bool>]>,
-    prev: Option<&[(TwoView, FitReport)]>,
+    prev: Option<&[PairFit]>,
     o: &RomoOptions,
     round: usize,
 ) -> Result<RoundLabels> {
     let np = pr.fwd.len();
-    let fits: Vec<(TwoView, FitReport)> = (0..np)
+    let fits: Vec<PairFit> = (0..np)
         .into_par_iter()
         .map(|p| {
             let usable: Vec<bool> = match moving {
@@ -337,13 +357,14 @@ fn label_round(
             // moving and the override would not fire again.
             if let Some(prev) = prev
                 && o.labels.f_informative_fraction > 0.0
-                && prev[p].1.model == "F"
-                && prev[p].1.u_fraction_f >= o.labels.f_informative_fraction as f64
+                && prev[p].report.model == "F"
+                && prev[p].report.u_fraction_f >= o.labels.f_informative_fraction as f64
             {
                 lo.robust.selection = ModelSelection::Fundamental;
             }
-            fit_pair(&pr.fwd[p], &usable, &lo, seed)
-                .or_else(|_| fit_pair(&pr.fwd[p], &pr.valid_f[p], &lo, seed))
+            let focal = Some(pr.grid_focal);
+            fit_pair(&pr.fwd[p], &usable, &lo, seed, focal)
+                .or_else(|_| fit_pair(&pr.fwd[p], &pr.valid_f[p], &lo, seed, focal))
                 .map_err(|e| RomoError::Geometry(format!("pair {p}–{}: {e}", p + 1)))
         })
         .collect::<Result<Vec<_>>>()?;
@@ -355,18 +376,20 @@ fn label_round(
                 sides.push(Side {
                     flow: &pr.fwd[t],
                     valid: &pr.valid_f[t],
-                    model: fits[t].0,
-                    report: &fits[t].1,
+                    model: fits[t].model,
+                    report: &fits[t].report,
                     second: false,
+                    oriented: fits[t].oriented.as_ref(),
                 });
             }
             if t > 0 {
                 sides.push(Side {
                     flow: &pr.bwd[t - 1],
                     valid: &pr.valid_b[t - 1],
-                    model: fits[t - 1].0,
-                    report: &fits[t - 1].1,
+                    model: fits[t - 1].model,
+                    report: &fits[t - 1].report,
                     second: true,
+                    oriented: fits[t - 1].oriented.as_ref(),
                 });
             }
             frame_labels(&sides, &o.labels)
@@ -545,7 +568,10 @@ pub fn segment_frames(
             report.frames.push(FrameReport {
                 index: t,
                 name: String::new(),
-                model_fwd: fits.get(t).map(|f| f.1.model.clone()).unwrap_or_default(),
+                model_fwd: fits
+                    .get(t)
+                    .map(|f| f.report.model.clone())
+                    .unwrap_or_default(),
                 inlier_ratio: l.inlier_ratio,
                 u_coverage: l.u_coverage,
                 l_coverage: l.l_coverage,
@@ -560,7 +586,7 @@ pub fn segment_frames(
                     / (gw * gh) as f32,
             });
         }
-        report.pairs = fits.into_iter().map(|f| f.1).collect();
+        report.pairs = fits.into_iter().map(|f| f.report).collect();
     }
     for (k, v) in timings {
         *report.timings_ms.entry(k).or_default() += v;

@@ -88,6 +88,16 @@ pub fn segment_scene(
         .map(|&i| scene.frames[i].name.clone())
         .collect();
     let out = opts.out.clone().unwrap_or_else(|| scene.root.clone());
+    // The scene's focal length (or the loader's 1.2 × long side prior when
+    // it has no cameras) for the cheirality test, at the frames' size.
+    let mut opts = opts.clone();
+    if opts.focal_ratio.is_none()
+        && let Some(&i) = video.first()
+    {
+        let k = &scene.frames[i].intrinsics;
+        opts.focal_ratio = Some(0.5 * (k.fx + k.fy) / k.width.max(1) as f64);
+    }
+    let opts = &opts;
     let mut report = segment_source(&SceneSource(scene, video), &names, &out, opts, progress)?;
     for &i in &extra {
         let (w, h) = (

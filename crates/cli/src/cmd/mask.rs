@@ -55,6 +55,14 @@ pub struct Args {
     /// Leave the two chromaticity channels out of the built-in features.
     #[arg(long)]
     pub no_chromaticity: bool,
+    /// Turn off the cheirality test (flow along the epipolar line that only
+    /// a point behind the cameras could make counts as motion; on by default).
+    #[arg(long)]
+    pub no_cheirality: bool,
+    /// Focal length ÷ image width for the cheirality test (default: the
+    /// scene's intrinsics, else 1.2 × long side ÷ width, COLMAP's prior).
+    #[arg(long)]
+    pub focal_ratio: Option<f64>,
 }
 
 /// Run `romosplat mask`.
@@ -91,6 +99,10 @@ pub fn run(args: &Args, ctx: &Ctx) -> anyhow::Result<serde_json::Value> {
         opts.refine.temporal_passes = n;
     }
     opts.chromaticity_features &= !args.no_chromaticity;
+    opts.labels.cheirality &= !args.no_cheirality;
+    if args.focal_ratio.is_some() {
+        opts.focal_ratio = args.focal_ratio;
+    }
     if let Some(m) = &args.onnx_features {
         opts.features = romo::FeatureBackend::Onnx { model: m.clone() };
     }

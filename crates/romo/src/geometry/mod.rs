@@ -4,12 +4,15 @@
 //! - [`homography`]: the normalised DLT and its transfer error, for pairs
 //!   with little parallax (pure rotation, distant scenes), where F is
 //!   ill-conditioned and absorbs moving objects (our addition to the paper);
+//! - [`oriented`]: a cheirality test that flags points moving along their
+//!   epipolar lines in a way only a point behind the cameras could (ours);
 //! - [`robust`]: Least-Median-of-Squares search over minimal samples (the
 //!   paper's choice, which beat RANSAC in our prototype), seeded, with a
 //!   report struct, and GRIC model selection (Torr 1998) between F and H.
 
 pub mod fundamental;
 pub mod homography;
+pub mod oriented;
 pub mod robust;
 
 use nalgebra::{Matrix3, SMatrix, SVector};

@@ -125,6 +125,11 @@ pub struct FitReport {
     /// (`S_F > u·v`; filled by [`crate::labels::fit_pair`], NaN otherwise).
     #[serde(default)]
     pub u_fraction_f: f64,
+    /// Fraction of the voting fit points in front of both cameras under
+    /// the pair's decomposed F (the cheirality test; NaN when undecided or
+    /// off).
+    #[serde(default)]
+    pub cheirality_support: f64,
 }
 
 #[derive(Clone)]
@@ -268,6 +273,7 @@ fn report_of(fit: &Fit, n: usize, o: &RobustOptions, gf: f64, gh: f64) -> FitRep
         gric_f: gf,
         gric_h: gh,
         u_fraction_f: f64::NAN,
+        cheirality_support: f64::NAN,
     }
 }
 
