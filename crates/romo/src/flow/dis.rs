@@ -52,13 +52,20 @@ pub struct DisOptions {
     /// Distance between patch origins in pixels (default 3).
     pub patch_stride: usize,
     /// Gauss–Newton iterations per patch, split over the two passes
-    /// (default 14, i.e. 7 per pass; OpenCV MEDIUM uses 25). With the
-    /// early stop most patches converge sooner; on the five small-motion
-    /// Sintel pairs (EPE all / non-occluded) 25 → 0.877 / 0.536, 20 →
-    /// 0.876 / 0.536, 16 → 0.883 / 0.538, 14 → 0.880 / 0.535, 12 → 0.883 /
-    /// 0.539 (OpenCV 0.895 / 0.541), at about half the search time of 25.
-    /// DAVIS mean J 0.569 (25) vs 0.563 (14), demo 0.692 vs 0.699: noise.
+    /// (default 25, i.e. 12 per pass, as OpenCV MEDIUM), at every level but
+    /// the finest computed one.
     pub grad_descent_iters: usize,
+    /// Gauss–Newton iterations per patch at the finest computed level
+    /// (default 16, i.e. 8 per pass; 0 = `grad_descent_iters`). The coarse
+    /// levels carry large motion and cost little; at the finest level the
+    /// flow is already close and the early stop ends most patches sooner.
+    /// On the five small-motion Sintel pairs (EPE all / non-occluded):
+    /// 25 → 0.877 / 0.536, 20 → 0.877 / 0.536, 18 → 0.879 / 0.539,
+    /// 16 → 0.878 / 0.537, 14 → 0.885 / 0.538, 12 → 0.888 / 0.539,
+    /// 10 → 0.889 / 0.540 (OpenCV MEDIUM 0.895 / 0.541). (Fewer at every
+    /// level misses a clean 40 px translation: the coarse levels need the
+    /// full count.)
+    pub finest_grad_descent_iters: usize,
     /// Width in pixels below which no coarser level is built (default 32;
     /// OpenCV's rule gives the same 32×14 coarsest level on Sintel).
     pub coarsest_width: usize,
@@ -85,7 +92,8 @@ impl Default for DisOptions {
             finest_scale: 1,
             patch_size: 8,
             patch_stride: 3,
-            grad_descent_iters: 14,
+            grad_descent_iters: 25,
+            finest_grad_descent_iters: 16,
             coarsest_width: 32,
             coarse_search_radius: 0,
             search_levels: 1,
@@ -98,7 +106,7 @@ impl Default for DisOptions {
 impl DisOptions {
     /// Preset for large motion (Sintel ambush/market, 30–70 px): the
     /// defaults with damped descent steps (`descent_step` 0.125, which need
-    /// the full 25 Gauss–Newton iterations) and the
+    /// the full 25 Gauss–Newton iterations at every level) and the
     /// coarsest level kept at ≥ 64 px wide (`coarsest_width` 64; on Sintel
     /// 64×28 instead of 32×14, where 8-px patches cover a quarter of the
     /// image height). Measured mean EPE on the five large-motion pairs
@@ -112,7 +120,7 @@ impl DisOptions {
         Self {
             descent_step: 0.125,
             coarsest_width: 64,
-            grad_descent_iters: 25,
+            finest_grad_descent_iters: 0,
             ..Self::default()
         }
     }
@@ -200,6 +208,8 @@ struct Level<'a> {
     par: bool,
     /// Run the exhaustive search here.
     search: bool,
+    /// Gauss–Newton iterations per patch here.
+    iters: usize,
 }
 
 impl Dis {
@@ -279,7 +289,7 @@ impl Dis {
             img: &img,
             patches: &patches,
             nx,
-            iters: o.grad_descent_iters,
+            iters: lv.iters,
             step: o.descent_step,
             search_radius: if lv.search { o.coarse_search_radius } else { 0 },
         };
@@ -412,6 +422,11 @@ impl Dis {
                 i0y,
                 par,
                 search: l + self.opts.search_levels > coarsest,
+                iters: if l == finest && self.opts.finest_grad_descent_iters > 0 {
+                    self.opts.finest_grad_descent_iters
+                } else {
+                    self.opts.grad_descent_iters
+                },
             };
             flow = self.level(&lv, flow, &mut lt);
             times.levels.push(lt);
