@@ -30,9 +30,6 @@ const BLOCK_COLS: u32 = 8u;
 var<workgroup> s_mean_op: array<vec4<f32>, 256>;  // mean x, mean y, opacity
 var<workgroup> s_conic: array<vec4<f32>, 256>;    // a, b, c
 var<workgroup> s_color: array<vec4<f32>, 256>;    // r, g, b
-var<workgroup> s_list: array<u32, 512>;
-var<workgroup> s_cnt: array<u32, 32>;
-var<workgroup> s_len: array<u32, 2>;
 var<workgroup> n_done: atomic<u32>;
 var<workgroup> all_done: u32;
 
@@ -156,33 +153,7 @@ fn rasterize_main(@builtin(workgroup_id) wid: vec3<u32>, @builtin(local_invocati
                 }
             }
         }
-        s_cnt[lid] = countOneBits(f0);
-        s_cnt[THREADS + lid] = countOneBits(f1);
-        workgroupBarrier();
-        if (lid < 2u) {
-            var total = 0u;
-            for (var t = 0u; t < THREADS; t++) {
-                let c = s_cnt[lid * THREADS + t];
-                s_cnt[lid * THREADS + t] = total;
-                total += c;
-            }
-            s_len[lid] = total;
-        }
-        workgroupBarrier();
-        var o0 = s_cnt[lid];
-        var o1 = TILE_PIXELS + s_cnt[THREADS + lid];
-        for (var q = 0u; q < TILE_PIXELS / THREADS; q++) {
-            let idx = lid * (TILE_PIXELS / THREADS) + q;
-            if (((f0 >> q) & 1u) != 0u) {
-                s_list[o0] = idx;
-                o0++;
-            }
-            if (((f1 >> q) & 1u) != 0u) {
-                s_list[o1] = idx;
-                o1++;
-            }
-        }
-        workgroupBarrier();
+        compact_block_lists(lid, f0, f1, 2u);
         let len = s_len[my_block];
         for (var m = 0u; m < len && !done; m++) {
             let j = s_list[my_block * TILE_PIXELS + m];

@@ -41,9 +41,6 @@ var<workgroup> wg_last: u32;
 // from the host: 8 when every subgroup lies inside one block, else 16):
 // the batch slots of splats that can touch the block, in traversal order.
 const LISTS: u32 = TILE_SIZE / LIST_COLS;
-var<workgroup> s_list: array<u32, 512>;
-var<workgroup> s_cnt: array<u32, 32>;
-var<workgroup> s_len: array<u32, 2>;
 var<workgroup> wg_list_max: array<atomic<u32>, 2>;
 var<workgroup> wg_list_last: array<u32, 2>;
 
@@ -229,33 +226,7 @@ fn rasterize_backward_main(@builtin(workgroup_id) wid: vec3<u32>, @builtin(local
                 }
             }
         }
-        s_cnt[lid] = countOneBits(f0);
-        s_cnt[THREADS + lid] = countOneBits(f1);
-        workgroupBarrier();
-        if (lid < LISTS) {
-            var total = 0u;
-            for (var t = 0u; t < THREADS; t++) {
-                let c = s_cnt[lid * THREADS + t];
-                s_cnt[lid * THREADS + t] = total;
-                total += c;
-            }
-            s_len[lid] = total;
-        }
-        workgroupBarrier();
-        var o0 = s_cnt[lid];
-        var o1 = TILE_PIXELS + s_cnt[THREADS + lid];
-        for (var q = 0u; q < TILE_PIXELS / THREADS; q++) {
-            let idx = lid * (TILE_PIXELS / THREADS) + q;
-            if (((f0 >> q) & 1u) != 0u) {
-                s_list[o0] = idx;
-                o0++;
-            }
-            if (((f1 >> q) & 1u) != 0u) {
-                s_list[o1] = idx;
-                o1++;
-            }
-        }
-        workgroupBarrier();
+        compact_block_lists(lid, f0, f1, LISTS);
         // The trip count is uniform over a block's invocations, so the loop
         // stays subgroup-uniform for `grad_acc` (entries at or past a
         // pixel's `last` are skipped in `px_step`).

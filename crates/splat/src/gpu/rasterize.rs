@@ -14,7 +14,10 @@ pub const PIXELS_PER_THREAD: u32 = 16;
 
 pub static DECL: KernelDecl = KernelDecl {
     name: "rasterize",
-    source: include_str!("../../../../shaders/splat/rasterize.wgsl"),
+    source: concat!(
+        include_str!("../../../../shaders/splat/block_lists.wgsl"),
+        include_str!("../../../../shaders/splat/rasterize.wgsl")
+    ),
     entry_points: &["rasterize_main"],
     bindings: &[
         BindingDecl {

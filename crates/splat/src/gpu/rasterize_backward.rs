@@ -19,7 +19,10 @@ pub const GRAD_STRIDE: u64 = 12;
 
 pub static DECL: KernelDecl = KernelDecl {
     name: "rasterize_backward",
-    source: include_str!("../../../../shaders/splat/rasterize_backward.wgsl"),
+    source: concat!(
+        include_str!("../../../../shaders/splat/block_lists.wgsl"),
+        include_str!("../../../../shaders/splat/rasterize_backward.wgsl")
+    ),
     entry_points: &["rasterize_backward_main"],
     bindings: &[
         BindingDecl {
