@@ -44,16 +44,16 @@ fn small_scene_masks_match_ground_truth_motion() {
         "small scene: J {:.3} P {:.3} R {:.3}",
         m.j_mean, m.precision, m.recall
     );
-    // Measured 2026-11-22 (dev profile, 24 frames + 4 held-out views,
-    // default options): J 0.429, precision 0.82, recall 0.36 (before the
-    // F-informative override / chromaticity / temporal smoothing: J 0.413).
-    // U covers only ~0.1% of the grid: the pedestrians cross sideways while
-    // the camera dollies sideways, so most of their motion lies along
-    // epipolar lines where the Sampson residual cannot see it. Thresholds a
-    // bit below the measurement.
+    // Measured 2026-11-22 (24 frames + 4 held-out views, default options):
+    // J 0.610, precision 0.83, recall 0.60 with the cheirality test (0.429
+    // / 0.82 / 0.36 without: the pedestrians cross sideways while the
+    // camera dollies sideways, so their motion lies along epipolar lines
+    // where the Sampson residual cannot see it; those walking the camera's
+    // way faster than it move backwards, which the cheirality test flags).
+    // Thresholds a bit below the measurement.
     assert!(m.precision >= 0.6, "precision {}", m.precision);
     assert!(
-        m.j_mean >= 0.38,
+        m.j_mean >= 0.52,
         "J {} (precision {}, recall {})",
         m.j_mean,
         m.precision,

@@ -47,9 +47,34 @@ pub enum StrategyArg {
 
 /// Make a backend; says which on stderr.
 pub fn make_backend(kind: BackendKind, ctx: &Ctx) -> anyhow::Result<Box<dyn TrainBackend>> {
-    let gpu = || splat::gpu::backend::GpuBackend::new(&splat::gpu::context::GpuOptions::default());
+    make_train_backend(kind, false, ctx)
+}
+
+/// Make a backend, with sparse Adam on the GPU when asked (an error on the
+/// CPU reference, which has only dense Adam); says which on stderr.
+pub fn make_train_backend(
+    kind: BackendKind,
+    sparse_adam: bool,
+    ctx: &Ctx,
+) -> anyhow::Result<Box<dyn TrainBackend>> {
+    let gpu = || {
+        splat::gpu::backend::GpuBackend::new(&splat::gpu::context::GpuOptions::default()).map(
+            |mut g| {
+                g.sparse_adam = sparse_adam;
+                g
+            },
+        )
+    };
+    let cpu = || {
+        if sparse_adam {
+            anyhow::bail!(
+                "--sparse-adam needs the wgpu backend (the CPU reference has dense Adam only)"
+            )
+        }
+        Ok(CpuBackend::new())
+    };
     let b: Box<dyn TrainBackend> = match kind {
-        BackendKind::Cpu => Box::new(CpuBackend::new()),
+        BackendKind::Cpu => Box::new(cpu()?),
         BackendKind::Wgpu => Box::new(gpu().map_err(|e| anyhow::anyhow!("wgpu backend: {e}"))?),
         BackendKind::Auto => match gpu() {
             Ok(g) => Box::new(g),
@@ -57,7 +82,7 @@ pub fn make_backend(kind: BackendKind, ctx: &Ctx) -> anyhow::Result<Box<dyn Trai
                 ctx.info(format!(
                     "no usable GPU adapter ({e}); using the CPU reference backend"
                 ));
-                Box::new(CpuBackend::new())
+                Box::new(cpu()?)
             }
         },
     };
@@ -121,6 +146,12 @@ pub struct Args {
     /// that carry the background).
     #[arg(long, default_value_t = splat::strategy::DefaultStrategyOptions::default().prune_screen_px)]
     pub prune_screen_px: f32,
+    /// Sparse Adam on the GPU (gsplat's SelectiveAdam, Brush): splats not
+    /// visible in a step's view keep their parameters and moments instead
+    /// of decaying the moments and moving by momentum as torch's dense Adam
+    /// does (INRIA). Off by default; wgpu only.
+    #[arg(long)]
+    pub sparse_adam: bool,
     /// Raise the active SH degree by one every N steps (INRIA 1000).
     #[arg(long, default_value_t = TrainOptions::default().sh_degree_every)]
     pub sh_degree_every: u32,
@@ -281,7 +312,7 @@ pub fn run(args: &Args, ctx: &Ctx) -> anyhow::Result<serde_json::Value> {
     };
     std::fs::create_dir_all(&args.out)
         .with_context(|| format!("creating {}", args.out.display()))?;
-    let mut backend = make_backend(args.backend, ctx)?;
+    let mut backend = make_train_backend(args.backend, args.sparse_adam, ctx)?;
     let pb = ctx.progress(opts.steps as u64, "train");
     pb.set_position(start.step as u64);
     let mut trainer = Trainer {
