@@ -227,8 +227,9 @@ pub fn fit_pair(
 }
 
 /// Decompose `F` with focal `focal_px` for the cheirality test, decided by
-/// the votes of the fit points F calls static. None when the votes do not
-/// decide (little translation).
+/// the votes of the fit points whose Sampson distance is below
+/// max(l, u/2)·v (those F does not call moving). None when the votes do
+/// not decide (little translation).
 fn orient(
     fm: &TwoView,
     focal_px: f64,
