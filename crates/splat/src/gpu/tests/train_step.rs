@@ -11,6 +11,48 @@ use crate::train::adam::AdamConfig;
 use crate::types::{AdamState, RenderOptions, Splats};
 use rand::{Rng, SeedableRng};
 
+/// Uniforms of one Adam step `t` (1-based) over `n` elements: elements with
+/// `k % stride < head` use `lr_head` (stride 0: none); `sparse_width` > 0
+/// is sparse mode.
+fn adam_uniforms(
+    cfg: &AdamConfig,
+    t: i32,
+    n: usize,
+    (lr, lr_head): (f32, f32),
+    (stride, head): (u32, u32),
+    sparse_width: u32,
+) -> AdamUniforms {
+    AdamUniforms {
+        n: n as u32,
+        stride,
+        head,
+        sparse_width,
+        lr,
+        lr_head,
+        beta1: cfg.beta1,
+        beta2: cfg.beta2,
+        bc1: 1.0 - cfg.beta1.powi(t),
+        sbc2: (1.0 - cfg.beta2.powi(t)).sqrt(),
+        eps: cfg.eps,
+        pad2: 0.0,
+    }
+}
+
+/// Record, submit and wait for one Adam dispatch.
+fn run_adam(c: &crate::gpu::GpuContext, adam: &Adam, args: &AdamArgs) {
+    let mut rec = Recorder::new(c, false);
+    adam.dispatch(c, &mut rec, args).unwrap();
+    rec.finish().unwrap();
+}
+
+/// The CPU formula for one element: new (m, v, p).
+fn adam_element(u: &AdamUniforms, lr: f32, (m, v, p, g): (f32, f32, f32, f32)) -> (f32, f32, f32) {
+    let g = if g.is_finite() { g } else { 0.0 };
+    let m = u.beta1 * m + (1.0 - u.beta1) * g;
+    let v = u.beta2 * v + (1.0 - u.beta2) * g * g;
+    (m, v, p - lr / u.bc1 * m / (v.sqrt() / u.sbc2 + u.eps))
+}
+
 #[test]
 fn adam_kernel_matches_cpu_formula() {
     let Some(c) = ctx() else { return };
@@ -27,44 +69,24 @@ fn adam_kernel_matches_cpu_formula() {
         let mut g: Vec<f32> = (0..n).map(|_| r.random_range(-1.0f32..1.0)).collect();
         g[7] = f32::NAN; // non-finite gradients count as 0
         let gb = c.upload("g", &g);
-        let (bc1, sbc2) = (1.0 - cfg.beta1.powi(t), (1.0 - cfg.beta2.powi(t)).sqrt());
         // stride 10, head 3: elements with k % 10 < 3 use lr_head.
         let (lr, lr_head) = (0.01f32, 0.05f32);
-        let uniforms = AdamUniforms {
-            n: n as u32,
-            stride: 10,
-            head: 3,
-            sparse_width: 0,
-            lr,
-            lr_head,
-            beta1: cfg.beta1,
-            beta2: cfg.beta2,
-            bc1,
-            sbc2,
-            eps: cfg.eps,
-            pad2: 0.0,
-        };
-        let mut rec = Recorder::new(c, false);
-        adam.dispatch(
+        let u = adam_uniforms(&cfg, t, n, (lr, lr_head), (10, 3), 0);
+        run_adam(
             c,
-            &mut rec,
+            &adam,
             &AdamArgs {
                 params: &pb,
                 grads: &gb,
                 exp_avg: &mb,
                 exp_avg_sq: &vb,
                 visible: &dummy, // not read when dense
-                uniforms,
+                uniforms: u,
             },
-        )
-        .unwrap();
-        rec.finish().unwrap();
+        );
         for k in 0..n {
-            let gk = if g[k].is_finite() { g[k] } else { 0.0 };
-            m[k] = cfg.beta1 * m[k] + (1.0 - cfg.beta1) * gk;
-            v[k] = cfg.beta2 * v[k] + (1.0 - cfg.beta2) * gk * gk;
             let l = if k % 10 < 3 { lr_head } else { lr };
-            p[k] -= l / bc1 * m[k] / (v[k].sqrt() / sbc2 + cfg.eps);
+            (m[k], v[k], p[k]) = adam_element(&u, l, (m[k], v[k], p[k], g[k]));
         }
         let gp: Vec<f32> = c.read(&pb, n).unwrap();
         for k in 0..n {
@@ -101,37 +123,20 @@ fn sparse_adam_updates_only_visible_splats() {
         .collect();
     let (pb, mb, vb) = (c.upload("p", &p0), c.upload("m", &m0), c.upload("v", &v0));
     let (gb, visb) = (c.upload("g", &g), c.upload("proj", &proj));
-    let cfg = AdamConfig::default();
-    let (bc1, sbc2) = (1.0 - cfg.beta1, (1.0 - cfg.beta2).sqrt());
     let lr = 0.01f32;
-    let mut rec = Recorder::new(c, false);
-    adam.dispatch(
+    let u = adam_uniforms(&AdamConfig::default(), 1, n, (lr, lr), (0, 0), width as u32);
+    run_adam(
         c,
-        &mut rec,
+        &adam,
         &AdamArgs {
             params: &pb,
             grads: &gb,
             exp_avg: &mb,
             exp_avg_sq: &vb,
             visible: &visb,
-            uniforms: AdamUniforms {
-                n: n as u32,
-                stride: 0,
-                head: 0,
-                sparse_width: width as u32,
-                lr,
-                lr_head: lr,
-                beta1: cfg.beta1,
-                beta2: cfg.beta2,
-                bc1,
-                sbc2,
-                eps: cfg.eps,
-                pad2: 0.0,
-            },
+            uniforms: u,
         },
-    )
-    .unwrap();
-    rec.finish().unwrap();
+    );
     let (gp, gm, gv): (Vec<f32>, Vec<f32>, Vec<f32>) = (
         c.read(&pb, n).unwrap(),
         c.read(&mb, n).unwrap(),
@@ -139,9 +144,7 @@ fn sparse_adam_updates_only_visible_splats() {
     );
     for k in 0..n {
         if vis[k / width] {
-            let m = cfg.beta1 * m0[k] + (1.0 - cfg.beta1) * g[k];
-            let v = cfg.beta2 * v0[k] + (1.0 - cfg.beta2) * g[k] * g[k];
-            let p = p0[k] - lr / bc1 * m / (v.sqrt() / sbc2 + cfg.eps);
+            let (m, v, p) = adam_element(&u, lr, (m0[k], v0[k], p0[k], g[k]));
             assert!((gm[k] - m).abs() <= 1e-7, "m[{k}]");
             assert!((gv[k] - v).abs() <= 1e-7, "v[{k}]");
             assert!((gp[k] - p).abs() <= 1e-6, "p[{k}]: {} vs {p}", gp[k]);
