@@ -18,10 +18,12 @@
 
 use crate::flow::Flow;
 use crate::geometry::Pt;
+use crate::geometry::fundamental::sampson_px;
 use crate::geometry::oriented::{Oriented, VoteOptions, intrinsics};
 use crate::geometry::robust::{
     FitReport, ModelSelection, RobustOptions, TwoView, fit_two_view_all,
 };
+use nalgebra::Matrix3;
 use rand::{Rng, SeedableRng};
 use rayon::prelude::*;
 use serde::{Deserialize, Serialize};
@@ -189,9 +191,12 @@ pub fn fit_pair(
     let (a, b) = fit_points(f, usable, o, seed);
     let fits = fit_two_view_all(&a, &b, &o.robust)?;
     let v = f.mean_magnitude() as f64;
-    let oriented = focal_px
-        .filter(|_| o.cheirality)
-        .and_then(|fp| orient(&fits.fundamental, fp, (f.w(), f.h()), &a, &b, o, v));
+    let oriented = match (focal_px, &fits.fundamental) {
+        (Some(fp), TwoView::Fundamental(fm)) if o.cheirality => {
+            orient(fm, fp, (f.w(), f.h()), &a, &b, o, v)
+        }
+        _ => None,
+    };
     // Moving according to F: Sampson, and the cheirality violation.
     let residual_f = |p: Pt, q: Pt| {
         let r = fits.fundamental.residual_px(p, q);
@@ -231,7 +236,7 @@ pub fn fit_pair(
 /// max(l, u/2)·v (those F does not call moving). None when the votes do
 /// not decide (little translation).
 fn orient(
-    fm: &TwoView,
+    fm: &Matrix3<f64>,
     focal_px: f64,
     (w, h): (usize, usize),
     a: &[Pt],
@@ -239,9 +244,6 @@ fn orient(
     o: &LabelOptions,
     v: f64,
 ) -> Option<Oriented> {
-    let TwoView::Fundamental(f) = fm else {
-        return None;
-    };
     if !(focal_px.is_finite() && focal_px > 0.0) {
         return None;
     }
@@ -250,10 +252,10 @@ fn orient(
     let (a, b): (Vec<Pt>, Vec<Pt>) = a
         .iter()
         .zip(b)
-        .filter(|(p, q)| fm.residual_px(**p, **q) < thr)
+        .filter(|(p, q)| sampson_px(fm, **p, **q) < thr)
         .map(|(p, q)| (*p, *q))
         .unzip();
-    Oriented::from_fundamental(f, &k, &a, &b, &VoteOptions::default())
+    Oriented::from_fundamental(fm, &k, &a, &b, &VoteOptions::default())
 }
 
 /// One side (forward or backward) of a frame's evidence.

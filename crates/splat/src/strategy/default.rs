@@ -147,9 +147,8 @@ impl Strategy for DefaultStrategy {
         let o = self.opts.clone();
         let mut rep = RefineReport::default();
         if self.densifying(step) && step > o.densify_from && step.is_multiple_of(o.densify_every) {
-            let size_threshold = (o.opacity_reset_every > 0 && step > o.opacity_reset_every)
-                .then_some((o.prune_screen_px > 0.0).then_some(o.prune_screen_px));
-            densify_and_prune(state, &o, scene, size_threshold, seed, &mut rep);
+            let after_reset = o.opacity_reset_every > 0 && step > o.opacity_reset_every;
+            densify_and_prune(state, &o, scene, after_reset, seed, &mut rep);
         }
         if self.densifying(step)
             && o.opacity_reset_every > 0
@@ -179,7 +178,7 @@ fn densify_and_prune(
     state: &mut ModelState,
     o: &DefaultStrategyOptions,
     scene: &SceneInfo,
-    size_threshold: Option<Option<f32>>,
+    after_reset: bool,
     seed: u64,
     rep: &mut RefineReport,
 ) {
@@ -266,9 +265,9 @@ fn densify_and_prune(
         let mut bad =
             op.is_nan() || op < o.prune_opacity || !s.means[i].iter().all(|v| v.is_finite());
         // After the first reset: oversized in the world, and (when on) on screen.
-        if let Some(screen) = size_threshold {
-            let big_screen =
-                screen.is_some_and(|px| state.stats.max_radius.get(i).is_some_and(|&m| m > px));
+        if after_reset {
+            let px = o.prune_screen_px;
+            let big_screen = px > 0.0 && state.stats.max_radius.get(i).is_some_and(|&m| m > px);
             bad |= big_screen || max_scale(&s.log_scales[i]) > world;
         }
         if bad && !*r {
