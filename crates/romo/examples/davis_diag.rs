@@ -4,7 +4,12 @@
 //! of L lies inside the object (L error), the MLP output on the grid
 //! (J / precision / recall at the threshold) and after refinement to full
 //! resolution. Env as in the `davis` example (`DAVIS_DIR`, `ROMO_OPTS`,
-//! `SEQS`), plus `MAXF` (first N frames only).
+//! `SEQS`), plus `MAXF` (first N frames only), `DUMP` (a folder for
+//! frame | U/L | probability | truth images) and `ORACLE=1` (train on the
+//! ground truth as U/L: what the features and MLP can do with perfect
+//! labels). Any folder with `JPEGImages/480p/<seq>/` and
+//! `Annotations/480p/<seq>/` (255 = moving) works, e.g. a generated scene's
+//! `images/` and `gt_motion/` linked in.
 #![allow(clippy::unwrap_used, clippy::expect_used)]
 use romo::plane::{Plane, Rgb};
 use std::path::PathBuf;
@@ -82,7 +87,45 @@ fn main() {
         let fx = romo::scene::make_extractor(&opts).unwrap();
         let flow = romo::flow::dis::Dis::new(opts.flow.clone());
         let t = std::time::Instant::now();
-        let seg = romo::segment_frames(&src, &opts, &flow, fx.as_ref(), &|_, _, _| {}).unwrap();
+        // ORACLE=1: ground-truth U/L instead of the geometric labels.
+        let gts: Vec<Plane> = if std::env::var("ORACLE").is_ok() {
+            paths
+                .iter()
+                .map(|p| {
+                    let name = p.file_stem().unwrap().to_string_lossy().into_owned();
+                    let g = loader::io::read_gray8(
+                        davis
+                            .join("Annotations/480p")
+                            .join(&s)
+                            .join(format!("{name}.png")),
+                    )
+                    .unwrap();
+                    Plane {
+                        w: g.width() as usize,
+                        h: g.height() as usize,
+                        data: g.as_raw().iter().map(|v| *v as f32 / 255.0).collect(),
+                    }
+                })
+                .collect()
+        } else {
+            Vec::new()
+        };
+        let hook = |t: usize, (gw, gh): (usize, usize), fl: &mut romo::labels::FrameLabels| {
+            let g = gts[t].resize(gw, gh);
+            for (i, v) in g.data.iter().enumerate() {
+                fl.u[i] = *v > 0.5;
+                fl.l[i] = *v < 0.5;
+            }
+        };
+        let seg = romo::pipeline::segment_frames_with_labels(
+            &src,
+            &opts,
+            &flow,
+            fx.as_ref(),
+            &|_, _, _| {},
+            (!gts.is_empty()).then_some(&hook as romo::pipeline::LabelHook),
+        )
+        .unwrap();
         let secs = t.elapsed().as_secs_f64();
         let (gw, gh) = seg.report.grid;
         let (mut uc, mut lc, mut gc, mut fc) = (

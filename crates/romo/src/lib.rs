@@ -19,6 +19,7 @@ pub mod onnx;
 pub mod pipeline;
 pub mod plane;
 pub mod refine;
+pub mod regions;
 pub mod scene;
 
 pub use error::{Result, RomoError};

@@ -16,6 +16,7 @@ use crate::labels::{
 use crate::mlp::{Label, Mlp, MlpOptions, TrainReport, train};
 use crate::plane::{Plane, Rgb};
 use crate::refine::{RefineOptions, temporal_smooth, temporal_smooth_flow};
+use crate::regions::{RegionOptions, complete, flow_segments};
 use crate::{Result, RomoError};
 use rand::{Rng, SeedableRng};
 use rayon::prelude::*;
@@ -57,6 +58,8 @@ pub struct RomoOptions {
     pub iterations: usize,
     /// Refinement to full resolution.
     pub refine: RefineOptions,
+    /// Region completion over flow segments (ours; part of refinement).
+    pub regions: RegionOptions,
     /// Feature extractor.
     pub features: FeatureBackend,
     /// The built-in descriptor with its two chromaticity channels (ours;
@@ -91,6 +94,7 @@ impl Default for RomoOptions {
             mlp: MlpOptions::default(),
             iterations: 2,
             refine: RefineOptions::default(),
+            regions: RegionOptions::default(),
             features: FeatureBackend::Hand,
             chromaticity_features: true,
             focal_ratio: None,
@@ -119,7 +123,8 @@ impl RomoOptions {
         self.flow.validate()?;
         self.labels.validate()?;
         self.mlp.validate()?;
-        self.refine.validate()
+        self.refine.validate()?;
+        self.regions.validate()
     }
 
     /// The working grid for frames of `w × h`.
@@ -448,6 +453,25 @@ pub fn segment_frames(
     fx: &dyn FeatureExtractor,
     progress: &dyn Fn(&str, usize, usize),
 ) -> Result<Segmentation> {
+    segment_frames_with_labels(src, o, flow, fx, progress, None)
+}
+
+/// Labels hook of [`segment_frames_with_labels`]: called with the frame
+/// index, the grid size and that frame's labels of the round, which it may
+/// change.
+pub type LabelHook<'a> = &'a (dyn Fn(usize, (usize, usize), &mut FrameLabels) + Sync);
+
+/// [`segment_frames`] with a hook that may replace each round's U/L labels
+/// before the MLP trains on them (for diagnosis: with the ground truth as
+/// labels it measures what the features and MLP can do on their own).
+pub fn segment_frames_with_labels(
+    src: &dyn FrameSource,
+    o: &RomoOptions,
+    flow: &dyn FlowEstimator,
+    fx: &dyn FeatureExtractor,
+    progress: &dyn Fn(&str, usize, usize),
+    label_hook: Option<LabelHook>,
+) -> Result<Segmentation> {
     o.validate()?;
     let n = src.len();
     if n < 2 {
@@ -475,6 +499,11 @@ pub fn segment_frames(
         let (mut labels, fits) = tm.time("geometry", || {
             label_round(&pr, moving.as_deref(), prev, o, round)
         })?;
+        if let Some(hook) = label_hook {
+            for (t, fl) in labels.iter_mut().enumerate() {
+                hook(t, report.grid, fl);
+            }
+        }
         if o.labels.u_propagation_frames > 0 {
             tm.time("geometry", || {
                 propagate_u(
@@ -538,6 +567,20 @@ pub fn segment_frames(
     } else {
         planes
     };
+    if o.regions.enabled {
+        tm.time("regions", || {
+            planes.par_iter_mut().enumerate().for_each(|(t, p)| {
+                let f = if t < pr.fwd.len() {
+                    &pr.fwd[t]
+                } else {
+                    &pr.bwd[t - 1]
+                };
+                let lab = flow_segments(f, f.mean_magnitude(), o.regions.k, o.regions.min_size);
+                let fixed = last.as_ref().map(|(labels, _)| labels[t].l.as_slice());
+                complete(&mut p.data, &lab, o.regions.threshold, fixed);
+            })
+        });
+    }
     if o.refine.static_veto_factor > 0.0
         && let Some((labels, _)) = &last
     {

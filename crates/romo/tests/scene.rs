@@ -50,10 +50,11 @@ fn small_scene_masks_match_ground_truth_motion() {
     // camera dollies sideways, so their motion lies along epipolar lines
     // where the Sampson residual cannot see it; those walking the camera's
     // way faster than it move backwards, which the cheirality test flags).
+    // With region completion (default on): J 0.642, P 0.82, R 0.66.
     // Thresholds a bit below the measurement.
     assert!(m.precision >= 0.6, "precision {}", m.precision);
     assert!(
-        m.j_mean >= 0.52,
+        m.j_mean >= 0.56,
         "J {} (precision {}, recall {})",
         m.j_mean,
         m.precision,

@@ -63,6 +63,15 @@ pub struct Args {
     /// scene's intrinsics, else 1.2 × long side ÷ width, COLMAP's prior).
     #[arg(long)]
     pub focal_ratio: Option<f64>,
+    /// Turn off region completion (a segment of the flow field mostly
+    /// called moving becomes moving as a whole, except its confidently
+    /// static pixels; on by default).
+    #[arg(long)]
+    pub no_region_completion: bool,
+    /// Felzenszwalb–Huttenlocher scale k of those segments (default 4;
+    /// larger merges more).
+    #[arg(long)]
+    pub region_k: Option<f32>,
 }
 
 /// Run `romosplat mask`.
@@ -102,6 +111,10 @@ pub fn run(args: &Args, ctx: &Ctx) -> anyhow::Result<serde_json::Value> {
     opts.labels.cheirality &= !args.no_cheirality;
     if args.focal_ratio.is_some() {
         opts.focal_ratio = args.focal_ratio;
+    }
+    opts.regions.enabled &= !args.no_region_completion;
+    if let Some(k) = args.region_k {
+        opts.regions.k = k;
     }
     if let Some(m) = &args.onnx_features {
         opts.features = romo::FeatureBackend::Onnx { model: m.clone() };
