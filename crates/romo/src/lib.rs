@@ -24,6 +24,7 @@ pub mod scene;
 
 pub use error::{Result, RomoError};
 pub use pipeline::{
-    FeatureBackend, FrameReport, FrameSource, RomoOptions, RomoReport, Segmentation, segment_frames,
+    FeatureBackend, FlowBackend, FrameReport, FrameSource, RomoOptions, RomoReport, Segmentation,
+    segment_frames,
 };
 pub use scene::{segment_paths, segment_scene};

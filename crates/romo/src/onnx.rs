@@ -9,9 +9,20 @@
 //! encoder has the same shape of contract (input [1, 3, 1024, 1024]
 //! ImageNet-normalised RGB, output `image_embed` [1, 256, 64, 64]) and is
 //! used by setting `input_size` 1024 and `imagenet_norm`.
+//!
+//! Optical flow ([`OnnxFlow`], RAFT-style signature): two inputs f32
+//! [1, 3, H, W] (the first frame, then the second), first output f32
+//! [1, 2, h, w], the flow from the first to the second in pixels of its own
+//! grid (h × w may be the input size, or a fraction of it as RAFT's 1/8
+//! `flow_low`; it is resized and rescaled to the frames). Static input
+//! sizes are read from the model and the frames resized to them; dynamic
+//! ones get the frames resized to the next multiple of 8 (RAFT's
+//! requirement). `scripts/make_lk_flow_onnx.py` writes a
+//! Lucas–Kanade model with this signature, used by the tests.
 
 use crate::features::{FeatureExtractor, FeatureMap, HandFeatures};
-use crate::plane::Rgb;
+use crate::flow::{Flow, FlowEstimator};
+use crate::plane::{Plane, Rgb};
 use crate::{Result, RomoError};
 use ort::session::Session;
 use ort::value::Tensor;
@@ -35,50 +46,56 @@ pub struct OnnxFeatures {
     pub imagenet_norm: bool,
 }
 
+/// Load the runtime from `$ORT_DYLIB_PATH` (once per process) and a model.
+fn load_session(model: &Path) -> Result<(Session, ort::environment::Environment)> {
+    let lib = std::env::var_os("ORT_DYLIB_PATH").ok_or_else(|| {
+        RomoError::Onnx(
+            "ORT_DYLIB_PATH is not set: point it at libonnxruntime.so (e.g. the capi/ folder of `pip install onnxruntime`)"
+                .into(),
+        )
+    })?;
+    let lib = std::path::PathBuf::from(lib);
+    if !lib.exists() {
+        return Err(RomoError::Onnx(format!(
+            "{}: ONNX Runtime library not found",
+            lib.display()
+        )));
+    }
+    if !model.exists() {
+        return Err(RomoError::Onnx(format!(
+            "{}: model file not found",
+            model.display()
+        )));
+    }
+    // ONNX Runtime allows one environment per process: build it once
+    // and share it, so a process can load models (or run RoMo) twice.
+    let env = {
+        let mut g = ENV
+            .lock()
+            .map_err(|_| RomoError::Onnx("environment lock poisoned".into()))?;
+        match &*g {
+            Some(e) => e.clone(),
+            None => {
+                let e = ort::init_from(&lib)
+                    .map_err(|e| err(&lib.display().to_string(), e))?
+                    .build()
+                    .map_err(|e| err("ONNX Runtime environment", e))?;
+                *g = Some(e.clone());
+                e
+            }
+        }
+    };
+    let session = Session::builder(&env)
+        .map_err(|e| err("session", e))?
+        .commit_from_file(model)
+        .map_err(|e| err(&model.display().to_string(), e))?;
+    Ok((session, env))
+}
+
 impl OnnxFeatures {
     /// Load the runtime from `$ORT_DYLIB_PATH` and the model file.
     pub fn load(model: &Path) -> Result<Self> {
-        let lib = std::env::var_os("ORT_DYLIB_PATH").ok_or_else(|| {
-            RomoError::Onnx(
-                "ORT_DYLIB_PATH is not set: point it at libonnxruntime.so (e.g. the capi/ folder of `pip install onnxruntime`)"
-                    .into(),
-            )
-        })?;
-        let lib = std::path::PathBuf::from(lib);
-        if !lib.exists() {
-            return Err(RomoError::Onnx(format!(
-                "{}: ONNX Runtime library not found",
-                lib.display()
-            )));
-        }
-        if !model.exists() {
-            return Err(RomoError::Onnx(format!(
-                "{}: model file not found",
-                model.display()
-            )));
-        }
-        // ONNX Runtime allows one environment per process: build it once
-        // and share it, so a process can load models (or run RoMo) twice.
-        let env = {
-            let mut g = ENV
-                .lock()
-                .map_err(|_| RomoError::Onnx("environment lock poisoned".into()))?;
-            match &*g {
-                Some(e) => e.clone(),
-                None => {
-                    let e = ort::init_from(&lib)
-                        .map_err(|e| err(&lib.display().to_string(), e))?
-                        .build()
-                        .map_err(|e| err("ONNX Runtime environment", e))?;
-                    *g = Some(e.clone());
-                    e
-                }
-            }
-        };
-        let session = Session::builder(&env)
-            .map_err(|e| err("session", e))?
-            .commit_from_file(model)
-            .map_err(|e| err(&model.display().to_string(), e))?;
+        let (session, env) = load_session(model)?;
         Ok(Self {
             session: Mutex::new(session),
             _env: env,
@@ -151,5 +168,124 @@ impl FeatureExtractor for WithHand {
         let a = self.1.extract(frame, w, h)?;
         let b = self.0.extract(frame, w, h)?;
         FeatureMap::concat(&[a, b]).ok_or_else(|| RomoError::Onnx("feature sizes differ".into()))
+    }
+}
+
+/// An optical-flow network run through ONNX Runtime (see the module docs
+/// for the signature).
+pub struct OnnxFlow {
+    session: Mutex<Session>,
+    _env: ort::environment::Environment,
+    /// Static model input size (w, h), read from the model; None when its
+    /// height or width is dynamic.
+    pub input_size: Option<(usize, usize)>,
+    /// Pixel values are [0, 1] × `input_scale` (1 by default; 255 for RAFT
+    /// exports that take 0–255 and normalise inside).
+    pub input_scale: f32,
+}
+
+impl OnnxFlow {
+    /// Load the runtime from `$ORT_DYLIB_PATH` and the model file; checks
+    /// the two-input signature.
+    pub fn load(model: &Path, input_scale: f32) -> Result<Self> {
+        let (session, env) = load_session(model)?;
+        let ins = session.inputs();
+        if ins.len() != 2 {
+            return Err(RomoError::Onnx(format!(
+                "{}: a flow model takes two images, this one has {} inputs",
+                model.display(),
+                ins.len()
+            )));
+        }
+        let shape: Vec<i64> = ins[0]
+            .dtype()
+            .tensor_shape()
+            .map(|s| s.to_vec())
+            .unwrap_or_default();
+        if shape.len() != 4 || (shape[1] != 3 && shape[1] != -1) {
+            return Err(RomoError::Onnx(format!(
+                "{}: expected inputs [1, 3, H, W], the first is {shape:?}",
+                model.display()
+            )));
+        }
+        let input_size =
+            (shape[2] > 0 && shape[3] > 0).then_some((shape[3] as usize, shape[2] as usize));
+        if !(input_scale.is_finite() && input_scale > 0.0) {
+            return Err(RomoError::Onnx(format!(
+                "{}: input scale must be > 0",
+                model.display()
+            )));
+        }
+        Ok(Self {
+            session: Mutex::new(session),
+            _env: env,
+            input_size,
+            input_scale,
+        })
+    }
+
+    /// The size frames of `w × h` are given to the model at.
+    pub fn model_size(&self, w: usize, h: usize) -> (usize, usize) {
+        self.input_size
+            .unwrap_or((w.div_ceil(8).max(1) * 8, h.div_ceil(8).max(1) * 8))
+    }
+}
+
+impl FlowEstimator for OnnxFlow {
+    fn name(&self) -> &str {
+        "onnx-flow"
+    }
+
+    /// Gray frames are given to the model as three equal channels.
+    fn flow(&self, i0: &Plane, i1: &Plane) -> Result<Flow> {
+        if (i0.w, i0.h) != (i1.w, i1.h) {
+            return Err(RomoError::Input(format!(
+                "flow: frames of {}x{} and {}x{}",
+                i0.w, i0.h, i1.w, i1.h
+            )));
+        }
+        let (w, h) = (i0.w, i0.h);
+        let (mw, mh) = self.model_size(w, h);
+        let tensor = |p: &Plane| {
+            let r = p.resize(mw, mh);
+            let mut data = Vec::with_capacity(3 * mw * mh);
+            for _ in 0..3 {
+                data.extend(r.data.iter().map(|v| v * self.input_scale));
+            }
+            Tensor::from_array(([1usize, 3, mh, mw], data)).map_err(|e| err("input tensor", e))
+        };
+        let (a, b) = (tensor(i0)?, tensor(i1)?);
+        let mut session = self
+            .session
+            .lock()
+            .map_err(|_| RomoError::Onnx("session lock poisoned".into()))?;
+        let outputs = session
+            .run(ort::inputs![a, b])
+            .map_err(|e| err("flow inference", e))?;
+        let (shape, values) = outputs[0]
+            .try_extract_tensor::<f32>()
+            .map_err(|e| err("flow output", e))?;
+        if shape.len() != 4 || shape[0] != 1 || shape[1] != 2 {
+            return Err(RomoError::Onnx(format!(
+                "expected a [1, 2, h, w] flow output, got {shape:?}"
+            )));
+        }
+        let (oh, ow) = (shape[2] as usize, shape[3] as usize);
+        if values.len() != 2 * oh * ow || values.iter().any(|v| !v.is_finite()) {
+            return Err(RomoError::Onnx(
+                "flow output has non-finite values or the wrong length".into(),
+            ));
+        }
+        let plane = |k: usize| Plane {
+            w: ow,
+            h: oh,
+            data: values[k * oh * ow..(k + 1) * oh * ow].to_vec(),
+        };
+        // `Flow::resize` rescales the vectors with the grid.
+        Ok(Flow {
+            u: plane(0),
+            v: plane(1),
+        }
+        .resize(w, h))
     }
 }

@@ -39,6 +39,29 @@ pub enum FeatureBackend {
     },
 }
 
+/// Which optical-flow estimator the pipeline uses.
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize, Default)]
+#[serde(rename_all = "snake_case")]
+pub enum FlowBackend {
+    /// The built-in DIS (`RomoOptions::flow`; default).
+    #[default]
+    Dis,
+    /// A RAFT-style ONNX model (needs feature `onnx`; signature in
+    /// [`crate::onnx`]).
+    Onnx {
+        /// Path of the `.onnx` model.
+        model: PathBuf,
+        /// Pixel values [0, 1] × this go into the model (1; 255 for RAFT
+        /// exports that take 0–255).
+        #[serde(default = "one")]
+        input_scale: f32,
+    },
+}
+
+fn one() -> f32 {
+    1.0
+}
+
 /// All RoMo options. `Default` gives the paper's settings where the paper
 /// states them (see each sub-struct).
 #[derive(Debug, Clone, Serialize, Deserialize)]
@@ -50,6 +73,8 @@ pub struct RomoOptions {
     pub flow_scale: usize,
     /// Built-in flow parameters (DIS).
     pub flow: DisOptions,
+    /// Flow estimator (default: the built-in DIS).
+    pub flow_backend: FlowBackend,
     /// Cycle check, robust geometry and U/L thresholds.
     pub labels: LabelOptions,
     /// MLP training.
@@ -90,6 +115,7 @@ impl Default for RomoOptions {
             grid_max_side: 256,
             flow_scale: 2,
             flow: DisOptions::default(),
+            flow_backend: FlowBackend::Dis,
             labels: LabelOptions::default(),
             mlp: MlpOptions::default(),
             iterations: 2,

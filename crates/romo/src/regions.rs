@@ -180,7 +180,8 @@ pub fn complete(prob: &mut [f32], labels: &[u32], threshold: f32, fixed: Option<
     for i in 0..n {
         let r = labels[i] as usize;
         let mean = (sum[r] / cnt[r].max(1) as f64) as f32;
-        if mean > threshold && prob[i] < mean && !fixed.is_some_and(|f| f.get(i) == Some(&true)) {
+        let is_fixed = fixed.is_some_and(|f| f.get(i) == Some(&true));
+        if mean > threshold && prob[i] < mean && !is_fixed {
             prob[i] = mean;
         }
     }

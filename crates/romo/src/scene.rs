@@ -5,8 +5,11 @@
 //! `probabilities/<stem>.exr`.
 
 use crate::features::{FeatureExtractor, HandFeatures};
+use crate::flow::FlowEstimator;
 use crate::flow::dis::Dis;
-use crate::pipeline::{FeatureBackend, FrameSource, RomoOptions, RomoReport, segment_frames};
+use crate::pipeline::{
+    FeatureBackend, FlowBackend, FrameSource, RomoOptions, RomoReport, segment_frames,
+};
 use crate::plane::{Plane, Rgb};
 use crate::refine::{to_keep_mask, upsample_probability};
 use crate::{Result, RomoError};
@@ -63,6 +66,22 @@ pub fn make_extractor(o: &RomoOptions) -> Result<Box<dyn FeatureExtractor>> {
         ))),
         #[cfg(not(feature = "onnx"))]
         FeatureBackend::Onnx { model } => Err(RomoError::Onnx(format!(
+            "{}: this build has no ONNX support (rebuild with `--features romo/onnx`)",
+            model.display()
+        ))),
+    }
+}
+
+/// The flow estimator `opts.flow_backend` names.
+pub fn make_flow(o: &RomoOptions) -> Result<Box<dyn FlowEstimator>> {
+    match &o.flow_backend {
+        FlowBackend::Dis => Ok(Box::new(Dis::new(o.flow.clone()))),
+        #[cfg(feature = "onnx")]
+        FlowBackend::Onnx { model, input_scale } => {
+            Ok(Box::new(crate::onnx::OnnxFlow::load(model, *input_scale)?))
+        }
+        #[cfg(not(feature = "onnx"))]
+        FlowBackend::Onnx { model, .. } => Err(RomoError::Onnx(format!(
             "{}: this build has no ONNX support (rebuild with `--features romo/onnx`)",
             model.display()
         ))),
@@ -139,8 +158,8 @@ fn segment_source(
         return Err(RomoError::Input("one name per frame required".into()));
     }
     let fx = make_extractor(opts)?;
-    let flow = Dis::new(opts.flow.clone());
-    let seg = segment_frames(src, opts, &flow, fx.as_ref(), progress)?;
+    let flow = make_flow(opts)?;
+    let seg = segment_frames(src, opts, flow.as_ref(), fx.as_ref(), progress)?;
     let mut report = seg.report;
     for (f, n) in report.frames.iter_mut().zip(names) {
         f.name = n.clone();

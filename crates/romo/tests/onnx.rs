@@ -1,8 +1,10 @@
 //! ONNX Runtime path (feature `onnx`). A missing runtime must be an error,
 //! not a panic; with `ORT_DYLIB_PATH` set and the XFeat model present
 //! (`$XFEAT_ONNX`, default `../shared/data/onnx/xfeat.onnx`), the encoder
-//! must give a 64-channel 80×80 map that responds to image content. Skips
-//! cleanly when the runtime or model is absent and `CI` is unset.
+//! must give a 64-channel 80×80 map that responds to image content. The
+//! flow path runs the Lucas–Kanade model `scripts/make_lk_flow_onnx.py`
+//! writes (needs python3 with `onnx`) against a known translation. Skips
+//! cleanly when the runtime, model or python is absent and `CI` is unset.
 #![cfg(feature = "onnx")]
 #![allow(clippy::unwrap_used, clippy::expect_used)]
 
@@ -57,4 +59,103 @@ fn xfeat_encoder_runs() {
     assert!(diff > 1e-4, "descriptors do not depend on the image");
     let m = enc.extract(&img(0.0), 24, 16).unwrap();
     assert_eq!((m.c, m.w, m.h), (64, 24, 16));
+}
+
+/// The Lucas–Kanade flow model `scripts/make_lk_flow_onnx.py` writes, in a
+/// temp folder; None (skip) when the runtime, python3 or its `onnx` package
+/// is missing and `CI` is unset.
+fn lk_flow_model(dir: &std::path::Path) -> Option<PathBuf> {
+    let ci = std::env::var_os("CI").is_some();
+    if std::env::var_os("ORT_DYLIB_PATH").is_none() {
+        assert!(!ci, "CI set but ORT_DYLIB_PATH missing");
+        eprintln!("skipped: ORT_DYLIB_PATH not set");
+        return None;
+    }
+    let script =
+        PathBuf::from(env!("CARGO_MANIFEST_DIR")).join("../../scripts/make_lk_flow_onnx.py");
+    let out = dir.join("lk_flow.onnx");
+    let ok = std::process::Command::new("python3")
+        .arg(&script)
+        .arg(&out)
+        .status()
+        .is_ok_and(|s| s.success());
+    if !ok {
+        assert!(
+            !ci,
+            "CI set but {} failed (pip install onnx)",
+            script.display()
+        );
+        eprintln!("skipped: could not run {}", script.display());
+        return None;
+    }
+    Some(out)
+}
+
+/// A smooth texture shifted by (dx, dy) px.
+fn textured(w: usize, h: usize, dx: f32, dy: f32) -> Plane {
+    Plane::from_fn(w, h, |x, y| {
+        let (x, y) = (x as f32 - dx, y as f32 - dy);
+        0.5 + 0.2 * (x * 0.35).sin() * (y * 0.3).cos() + 0.15 * (x * 0.13 + y * 0.21).sin()
+    })
+}
+
+#[test]
+fn onnx_flow_recovers_a_known_translation() {
+    use romo::flow::FlowEstimator;
+    let dir = tempfile::tempdir().unwrap();
+    let Some(model) = lk_flow_model(dir.path()) else {
+        return;
+    };
+    let net = romo::onnx::OnnxFlow::load(&model, 1.0).unwrap();
+    assert_eq!(net.input_size, None, "the LK model has dynamic H, W");
+    // 96×64 goes in as is; 90×60 and 50×34 are resized to multiples of 8
+    // (96×64, 56×40) and their flow back.
+    // Measured errors < 0.005 px; a flow not rescaled from the model grid
+    // would be off by 0.047 (90 → 96) and 0.084 px (50 → 56).
+    for (w, h, tol_mean) in [(96usize, 64usize, 0.02f32), (90, 60, 0.02), (50, 34, 0.02)] {
+        let (dx, dy) = (0.7f32, -0.4f32);
+        let f = net
+            .flow(&textured(w, h, 0.0, 0.0), &textured(w, h, dx, dy))
+            .unwrap();
+        assert_eq!((f.w(), f.h()), (w, h));
+        let (mut su, mut sv, mut n) = (0.0f32, 0.0f32, 0.0f32);
+        for y in 10..h - 10 {
+            for x in 10..w - 10 {
+                su += f.u.data[y * w + x];
+                sv += f.v.data[y * w + x];
+                n += 1.0;
+            }
+        }
+        let (mu, mv) = (su / n, sv / n);
+        assert!(
+            (mu - dx).abs() < tol_mean && (mv - dy).abs() < tol_mean,
+            "{w}x{h}: mean flow ({mu}, {mv}), truth ({dx}, {dy})"
+        );
+    }
+    // The pipeline's backend switch builds it.
+    let opts = romo::RomoOptions {
+        flow_backend: romo::FlowBackend::Onnx {
+            model: model.clone(),
+            input_scale: 1.0,
+        },
+        ..Default::default()
+    };
+    assert_eq!(romo::scene::make_flow(&opts).unwrap().name(), "onnx-flow");
+}
+
+#[test]
+fn onnx_flow_rejects_bad_models_and_inputs() {
+    use romo::flow::FlowEstimator;
+    let r = romo::onnx::OnnxFlow::load(std::path::Path::new("/nonexistent/flow.onnx"), 1.0);
+    assert!(r.is_err());
+    let dir = tempfile::tempdir().unwrap();
+    let Some(model) = lk_flow_model(dir.path()) else {
+        return;
+    };
+    assert!(romo::onnx::OnnxFlow::load(&model, 0.0).is_err());
+    let net = romo::onnx::OnnxFlow::load(&model, 1.0).unwrap();
+    let e = net
+        .flow(&textured(32, 24, 0.0, 0.0), &textured(24, 32, 0.0, 0.0))
+        .unwrap_err();
+    assert!(e.to_string().contains("32x24"), "{e}");
 }

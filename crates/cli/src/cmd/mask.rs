@@ -27,6 +27,15 @@ pub struct Args {
     /// features; needs a build with `--features romo/onnx` and ORT_DYLIB_PATH.
     #[arg(long)]
     pub onnx_features: Option<PathBuf>,
+    /// ONNX optical-flow model (RAFT-style: two [1, 3, H, W] images in, a
+    /// [1, 2, h, w] flow out) instead of the built-in DIS; needs a build
+    /// with `--features romo/onnx` and ORT_DYLIB_PATH.
+    #[arg(long)]
+    pub onnx_flow: Option<PathBuf>,
+    /// Pixel values in [0, 1] are multiplied by this for the flow model
+    /// (255 for RAFT exports that take 0–255).
+    #[arg(long, default_value_t = 1.0)]
+    pub onnx_flow_scale: f32,
     /// Full options as JSON (a partial `RomoOptions`; flags above override).
     #[arg(long)]
     pub options: Option<PathBuf>,
@@ -115,6 +124,12 @@ pub fn run(args: &Args, ctx: &Ctx) -> anyhow::Result<serde_json::Value> {
     opts.regions.enabled &= !args.no_region_completion;
     if let Some(k) = args.region_k {
         opts.regions.k = k;
+    }
+    if let Some(m) = &args.onnx_flow {
+        opts.flow_backend = romo::FlowBackend::Onnx {
+            model: m.clone(),
+            input_scale: args.onnx_flow_scale,
+        };
     }
     if let Some(m) = &args.onnx_features {
         opts.features = romo::FeatureBackend::Onnx { model: m.clone() };
