@@ -87,29 +87,27 @@ fn main() {
         let fx = romo::scene::make_extractor(&opts).unwrap();
         let flow = romo::flow::dis::Dis::new(opts.flow.clone());
         let t = std::time::Instant::now();
+        // The ground truth (0 / 1) of every frame, at full resolution.
+        let gts: Vec<Plane> = paths
+            .iter()
+            .map(|p| {
+                let name = p.file_stem().unwrap().to_string_lossy().into_owned();
+                let g = loader::io::read_gray8(
+                    davis
+                        .join("Annotations/480p")
+                        .join(&s)
+                        .join(format!("{name}.png")),
+                )
+                .unwrap();
+                Plane {
+                    w: g.width() as usize,
+                    h: g.height() as usize,
+                    data: g.as_raw().iter().map(|v| (*v > 127) as u8 as f32).collect(),
+                }
+            })
+            .collect();
         // ORACLE=1: ground-truth U/L instead of the geometric labels.
-        let gts: Vec<Plane> = if std::env::var("ORACLE").is_ok() {
-            paths
-                .iter()
-                .map(|p| {
-                    let name = p.file_stem().unwrap().to_string_lossy().into_owned();
-                    let g = loader::io::read_gray8(
-                        davis
-                            .join("Annotations/480p")
-                            .join(&s)
-                            .join(format!("{name}.png")),
-                    )
-                    .unwrap();
-                    Plane {
-                        w: g.width() as usize,
-                        h: g.height() as usize,
-                        data: g.as_raw().iter().map(|v| *v as f32 / 255.0).collect(),
-                    }
-                })
-                .collect()
-        } else {
-            Vec::new()
-        };
+        let oracle = std::env::var("ORACLE").is_ok();
         let hook = |t: usize, (gw, gh): (usize, usize), fl: &mut romo::labels::FrameLabels| {
             let g = gts[t].resize(gw, gh);
             for (i, v) in g.data.iter().enumerate() {
@@ -123,7 +121,7 @@ fn main() {
             &flow,
             fx.as_ref(),
             &|_, _, _| {},
-            (!gts.is_empty()).then_some(&hook as romo::pipeline::LabelHook),
+            oracle.then_some(&hook as romo::pipeline::LabelHook),
         )
         .unwrap();
         let secs = t.elapsed().as_secs_f64();
@@ -139,18 +137,7 @@ fn main() {
         let mut tc = [Counts::default(); 3];
         let mut vc = Counts::default();
         for (i, p) in paths.iter().enumerate() {
-            let name = p.file_stem().unwrap().to_string_lossy().into_owned();
-            let gpath = davis
-                .join("Annotations/480p")
-                .join(&s)
-                .join(format!("{name}.png"));
-            let g = loader::io::read_gray8(&gpath).unwrap();
-            let (w, h) = (g.width() as usize, g.height() as usize);
-            let gtp = Plane {
-                w,
-                h,
-                data: g.as_raw().iter().map(|v| (*v > 127) as u8 as f32).collect(),
-            };
+            let gtp = &gts[i];
             let gt_full: Vec<bool> = gtp.data.iter().map(|v| *v > 0.5).collect();
             let gt_grid: Vec<bool> = gtp.resize(gw, gh).data.iter().map(|v| *v > 0.5).collect();
             gt_frac += gt_grid.iter().filter(|b| **b).count() as f64 / gt_grid.len() as f64;
