@@ -170,8 +170,9 @@ pub fn flow_segments(flow: &Flow, scale: f32, k: f32, min_size: usize) -> Vec<u3
 /// [`flow_segments`] and index pixels of `prob`.
 pub fn complete(prob: &mut [f32], labels: &[u32], threshold: f32, fixed: Option<&[bool]>) {
     let n = prob.len().min(labels.len());
-    let mut sum = vec![0.0f64; labels.len()];
-    let mut cnt = vec![0u32; labels.len()];
+    let m = labels.iter().map(|r| *r as usize + 1).max().unwrap_or(0);
+    let mut sum = vec![0.0f64; m];
+    let mut cnt = vec![0u32; m];
     for i in 0..n {
         let r = labels[i] as usize;
         sum[r] += prob[i] as f64;
