@@ -81,6 +81,19 @@ pub struct LabelOptions {
     /// [`crate::geometry::oriented`]; needs a focal length, from the scene
     /// or guessed). Default: see README.
     pub cheirality: bool,
+    /// Three-view depth consistency (ours; see [`three_view_residuals`]):
+    /// in frames whose two pairs both have a decided metric geometry (F
+    /// pairs with the cheirality test on), an unlabelled pixel whose
+    /// forward and backward depths disagree by more than
+    /// `three_view_u_px` becomes U, and an L pixel whose depths disagree by
+    /// more than `three_view_l_px` leaves L. Default: see README.
+    pub three_view: bool,
+    /// U threshold of the three-view residual, working-grid px (default
+    /// 0.5).
+    pub three_view_u_px: f32,
+    /// L-removal threshold of the three-view residual, working-grid px
+    /// (default 1.0).
+    pub three_view_l_px: f32,
     /// Robust estimation and model selection.
     pub robust: RobustOptions,
 }
@@ -97,6 +110,9 @@ impl Default for LabelOptions {
             f_informative_fraction: 0.005,
             u_propagation_frames: 0,
             cheirality: true,
+            three_view: true,
+            three_view_u_px: 0.5,
+            three_view_l_px: 1.0,
             robust: RobustOptions::default(),
         }
     }
@@ -109,9 +125,10 @@ impl LabelOptions {
             || self.l_factor < 0.0
             || self.fit_points < 15
             || !(0.0..=1.0).contains(&self.f_informative_fraction)
+            || !(self.three_view_u_px > 0.0 && self.three_view_l_px > 0.0)
         {
             return Err(crate::RomoError::Options(
-                "labels: need u_factor > l_factor >= 0, fit_points >= 15, f_informative_fraction in [0, 1]".into(),
+                "labels: need u_factor > l_factor >= 0, fit_points >= 15, f_informative_fraction in [0, 1], three_view_u_px and three_view_l_px > 0".into(),
             ));
         }
         self.robust.validate()
@@ -356,6 +373,102 @@ pub fn frame_labels(sides: &[Side], o: &LabelOptions) -> FrameLabels {
     }
 }
 
+/// Pixels with less parallax in either pair than this are not tested by
+/// [`three_view_residuals`] (working-grid px).
+pub const THREE_VIEW_MIN_PARALLAX_PX: f64 = 0.5;
+
+/// Three-view depth consistency of frame t (ours). Each pixel is
+/// triangulated twice, with the pair (t, t+1) through `fwd` and `of`, and
+/// with the pair (t−1, t) through `bwd` (t → t−1) and `ob`; each pair's
+/// depths are in units of its own baseline, so for a static point their
+/// ratio is the same everywhere: the ratio of the two baselines, taken as
+/// the median over the `reference` pixels (L). A pedestrian walking along
+/// the epipolar lines passes Sampson and cheirality in both pairs (it
+/// looks like a static point at another depth), but the depth it mimics
+/// depends on the camera's displacement relative to its own, so unless the
+/// camera moves at a constant velocity the two depths disagree. The
+/// residual is that disagreement as a change of the forward parallax:
+/// `parallax_f · |1 − ρ(x) / ρ̂|` px. NaN where a flow failed the cycle
+/// check, the parallax is below [`THREE_VIEW_MIN_PARALLAX_PX`] or a depth
+/// is not positive; None when fewer than 50 reference pixels qualify.
+#[allow(clippy::too_many_arguments)]
+pub fn three_view_residuals(
+    fwd: &Flow,
+    valid_f: &[bool],
+    of: &Oriented,
+    bwd: &Flow,
+    valid_b: &[bool],
+    ob: &Oriented,
+    reference: &[bool],
+) -> Option<Vec<f32>> {
+    let w = fwd.w();
+    let n = w * fwd.h();
+    if bwd.w() != w
+        || bwd.h() != fwd.h()
+        || [valid_f, valid_b, reference].iter().any(|v| v.len() != n)
+    {
+        return None;
+    }
+    // (depth ratio z_f / z_b, forward parallax) per pixel.
+    let per: Vec<Option<(f64, f64)>> = (0..n)
+        .into_par_iter()
+        .map(|i| {
+            if !valid_f[i] || !valid_b[i] {
+                return None;
+            }
+            let (x, y) = ((i % w) as f64, (i / w) as f64);
+            let a = [x + fwd.u.data[i] as f64, y + fwd.v.data[i] as f64];
+            let b = [x + bwd.u.data[i] as f64, y + bwd.v.data[i] as f64];
+            let df = of.depths([x, y], a);
+            let db = ob.depths(b, [x, y]);
+            let ok = df.parallax_px >= THREE_VIEW_MIN_PARALLAX_PX
+                && db.parallax_px >= THREE_VIEW_MIN_PARALLAX_PX
+                && df.z1 > 0.0
+                && db.z2 > 0.0
+                && (df.z1 / db.z2).is_finite();
+            ok.then_some((df.z1 / db.z2, df.parallax_px))
+        })
+        .collect();
+    let mut ratios: Vec<f64> = per
+        .iter()
+        .zip(reference)
+        .filter_map(|(p, r)| p.filter(|_| *r).map(|(q, _)| q))
+        .collect();
+    if ratios.len() < 50 {
+        return None;
+    }
+    let mid = ratios.len() / 2;
+    let (_, med, _) = ratios.select_nth_unstable_by(mid, |a, b| a.total_cmp(b));
+    let med = *med;
+    Some(
+        per.iter()
+            .map(|p| p.map_or(f32::NAN, |(q, par)| (par * (1.0 - q / med).abs()) as f32))
+            .collect(),
+    )
+}
+
+/// Apply [`three_view_residuals`] to a frame's labels (see
+/// [`LabelOptions::three_view`]) and update its coverage fractions.
+pub fn apply_three_view(fl: &mut FrameLabels, residual: &[f32], o: &LabelOptions) {
+    if fl.u.len() != residual.len() || fl.l.len() != residual.len() {
+        return;
+    }
+    for (i, e) in residual.iter().enumerate() {
+        if e.is_nan() {
+            continue;
+        }
+        if !fl.u[i] && !fl.l[i] && *e > o.three_view_u_px {
+            fl.u[i] = true;
+        }
+        if fl.l[i] && *e > o.three_view_l_px {
+            fl.l[i] = false;
+        }
+    }
+    let m = fl.u.len().max(1) as f32;
+    fl.u_coverage = fl.u.iter().filter(|b| **b).count() as f32 / m;
+    fl.l_coverage = fl.l.iter().filter(|b| **b).count() as f32 / m;
+}
+
 /// Spread U along the flow `passes` times (see
 /// [`LabelOptions::u_propagation_frames`]): frame t gains U where
 /// `fwd[t]` (t → t+1) lands in U of frame t+1 or `bwd[t−1]` (t → t−1) lands
@@ -481,6 +594,138 @@ mod tests {
     /// and a block of pixels on a walker moving the camera's way, faster:
     /// its flow stays on the epipolar lines. Sampson alone calls it static;
     /// with the cheirality test it is U, and the static scene stays clear.
+    /// Frames t−1, t, t+1 of a sideways dolly whose speed changes (camera
+    /// at x = −0.06, 0, +0.10, small yaws) and a pedestrian walking against
+    /// it (−0.1 per frame, depth 3): in both pairs its flow lies on the
+    /// epipolar lines and triangulates in front of the cameras, so Sampson
+    /// and cheirality are blind to it, but its two depths disagree. At
+    /// constant camera velocity they agree (the stated limit).
+    fn three_view_scene(cb_x: f64) -> (Flow, Flow, Oriented, Oriented, Vec<bool>, Matrix3<f64>) {
+        use nalgebra::Vector3;
+        let (w, h, focal) = (96usize, 64usize, 120.0);
+        let k = crate::geometry::oriented::intrinsics(
+            focal,
+            0.5 * (w as f64 - 1.0),
+            0.5 * (h as f64 - 1.0),
+        );
+        let ki = k.try_inverse().unwrap();
+        let yaw =
+            |a: f64| Matrix3::new(a.cos(), 0.0, a.sin(), 0.0, 1.0, 0.0, -a.sin(), 0.0, a.cos());
+        let (rf, rb) = (yaw(0.004), yaw(-0.003));
+        let (cf, cb) = (Vector3::new(0.10, 0.0, 0.0), Vector3::new(cb_x, 0.0, 0.0));
+        let step = Vector3::new(-0.1, 0.0, 0.0);
+        let walker = |x: usize, y: usize| (40..56).contains(&x) && (20..44).contains(&y);
+        let zero = || Flow {
+            u: Plane::filled(w, h, 0.0),
+            v: Plane::filled(w, h, 0.0),
+        };
+        let (mut fwd, mut bwd) = (zero(), zero());
+        let (mut va, mut vb, mut wa, mut wb) = (vec![], vec![], vec![], vec![]);
+        for y in 0..h {
+            for x in 0..w {
+                let i = y * w + x;
+                let wk = walker(x, y);
+                let z = if wk {
+                    3.0
+                } else {
+                    4.0 + 8.0 * (((x * 7 + y * 13) % 17) as f64 / 16.0)
+                };
+                let p = ki * Vector3::new(x as f64, y as f64, 1.0) * z;
+                let (pn, pp) = if wk { (p + step, p - step) } else { (p, p) };
+                let qf = k * (rf * (pn - cf));
+                let qb = k * (rb * (pp - cb));
+                let (xf, yf) = (qf[0] / qf[2], qf[1] / qf[2]);
+                let (xb, yb) = (qb[0] / qb[2], qb[1] / qb[2]);
+                fwd.u.data[i] = (xf - x as f64) as f32;
+                fwd.v.data[i] = (yf - y as f64) as f32;
+                bwd.u.data[i] = (xb - x as f64) as f32;
+                bwd.v.data[i] = (yb - y as f64) as f32;
+                if !wk {
+                    va.push([x as f64, y as f64]);
+                    vb.push([xf, yf]);
+                    wa.push([xb, yb]);
+                    wb.push([x as f64, y as f64]);
+                }
+            }
+        }
+        // p_{t+1} = R_f p_t − R_f c_f; p_t = R_bᵀ p_{t−1} + c_b.
+        let fm = |r: Matrix3<f64>, t: Vector3<f64>| {
+            let tx = Matrix3::new(0.0, -t[2], t[1], t[2], 0.0, -t[0], -t[1], t[0], 0.0);
+            ki.transpose() * tx * r * ki
+        };
+        let vote = VoteOptions::default();
+        let of = Oriented::from_fundamental(&fm(rf, -(rf * cf)), &k, &va, &vb, &vote).unwrap();
+        let ob = Oriented::from_fundamental(&fm(rb.transpose(), cb), &k, &wa, &wb, &vote).unwrap();
+        let wmask = (0..w * h).map(|i| walker(i % w, i / w)).collect();
+        (fwd, bwd, of, ob, wmask, fm(rf, -(rf * cf)))
+    }
+
+    #[test]
+    fn three_view_test_flags_a_walker_along_the_epipolar_lines() {
+        let (fwd, bwd, of, ob, walker, f_f) = three_view_scene(-0.06);
+        let (w, n) = (fwd.w(), walker.len());
+        let valid = vec![true; n];
+        let reference: Vec<bool> = walker.iter().map(|b| !b).collect();
+        let e = three_view_residuals(&fwd, &valid, &of, &bwd, &valid, &ob, &reference).unwrap();
+        let (mut hit, mut nw, mut worst_static) = (0, 0, 0.0f32);
+        for i in 0..n {
+            let (x, y) = ((i % w) as f64, (i / w) as f64);
+            let q = [x + fwd.u.data[i] as f64, y + fwd.v.data[i] as f64];
+            if walker[i] {
+                // Two-view tests are blind to it ...
+                assert!(crate::geometry::fundamental::sampson_px(&f_f, [x, y], q) < 0.05);
+                assert_eq!(of.violation_px([x, y], q), 0.0);
+                // ... the three-view residual is not (expected 2.7 px).
+                nw += 1;
+                hit += usize::from(e[i] > 1.5);
+            } else if !e[i].is_nan() {
+                worst_static = worst_static.max(e[i]);
+            }
+        }
+        assert!(
+            hit * 100 >= nw * 95,
+            "{hit} of {nw} walker pixels over 1.5 px"
+        );
+        assert!(
+            worst_static < 0.05,
+            "static residual up to {worst_static} px"
+        );
+        // Labels: the walker's left half unlabelled becomes U, its right half
+        // leaves L; the static scene keeps L.
+        let mut fl = FrameLabels {
+            s: vec![0.0; n],
+            u: vec![false; n],
+            l: (0..n).map(|i| !(walker[i] && i % w < 48)).collect(),
+            v: 1.0,
+            inlier_ratio: 1.0,
+            u_coverage: 0.0,
+            l_coverage: 1.0,
+            valid_ratio: 1.0,
+        };
+        apply_three_view(&mut fl, &e, &LabelOptions::default());
+        for i in 0..n {
+            if walker[i] && !e[i].is_nan() && e[i] > 1.0 {
+                assert!(!fl.l[i]);
+                assert_eq!(fl.u[i], i % w < 48);
+            } else if !walker[i] {
+                assert!(fl.l[i] && !fl.u[i]);
+            }
+        }
+        assert!(fl.u_coverage > 0.0 && fl.l_coverage < 1.0);
+        // Constant camera velocity: the walker is a static point at another
+        // depth in all three views, and the residual vanishes.
+        let (fwd, bwd, of, ob, walker, _) = three_view_scene(-0.10);
+        let e = three_view_residuals(&fwd, &valid, &of, &bwd, &valid, &ob, &reference).unwrap();
+        let worst = (0..n)
+            .filter(|i| walker[*i] && !e[*i].is_nan())
+            .map(|i| e[i])
+            .fold(0.0f32, f32::max);
+        assert!(
+            worst < 0.2,
+            "constant velocity: walker residual up to {worst} px"
+        );
+    }
+
     #[test]
     fn cheirality_flags_motion_along_epipolar_lines() {
         use nalgebra::{Matrix3, Vector3};

@@ -11,7 +11,8 @@ use crate::flow::dis::DisOptions;
 use crate::flow::{Flow, FlowEstimator};
 use crate::geometry::robust::{FitReport, ModelSelection};
 use crate::labels::{
-    FrameLabels, LabelOptions, PairFit, Side, cycle_valid, fit_pair, frame_labels, propagate_u,
+    FrameLabels, LabelOptions, PairFit, Side, apply_three_view, cycle_valid, fit_pair,
+    frame_labels, propagate_u, three_view_residuals,
 };
 use crate::mlp::{Label, Mlp, MlpOptions, TrainReport, train};
 use crate::plane::{Plane, Rgb};
@@ -423,7 +424,24 @@ fn label_round(
                     oriented: fits[t - 1].oriented.as_ref(),
                 });
             }
-            frame_labels(&sides, &o.labels)
+            let mut fl = frame_labels(&sides, &o.labels);
+            if o.labels.three_view
+                && t > 0
+                && t < np
+                && let (Some(of), Some(ob)) = (&fits[t].oriented, &fits[t - 1].oriented)
+                && let Some(e) = three_view_residuals(
+                    &pr.fwd[t],
+                    &pr.valid_f[t],
+                    of,
+                    &pr.bwd[t - 1],
+                    &pr.valid_b[t - 1],
+                    ob,
+                    &fl.l,
+                )
+            {
+                apply_three_view(&mut fl, &e, &o.labels);
+            }
+            fl
         })
         .collect();
     Ok((labels, fits))

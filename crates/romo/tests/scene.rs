@@ -50,11 +50,14 @@ fn small_scene_masks_match_ground_truth_motion() {
     // camera dollies sideways, so their motion lies along epipolar lines
     // where the Sampson residual cannot see it; those walking the camera's
     // way faster than it move backwards, which the cheirality test flags).
-    // With region completion (default on): J 0.642, P 0.82, R 0.66.
+    // With region completion (default on): J 0.642, P 0.82, R 0.66; with
+    // the three-view test too (default on): J 0.590, P 0.87, R 0.56 (this
+    // scene is seed-sensitive: seeds 1 / 2 give 0.602 / 0.492 with it,
+    // 0.554 / 0.544 without; seed 0 is deterministic run to run).
     // Thresholds a bit below the measurement.
     assert!(m.precision >= 0.6, "precision {}", m.precision);
     assert!(
-        m.j_mean >= 0.56,
+        m.j_mean >= 0.55,
         "J {} (precision {}, recall {})",
         m.j_mean,
         m.precision,
