@@ -72,6 +72,11 @@ pub struct Args {
     /// scene's intrinsics, else 1.2 × long side ÷ width, COLMAP's prior).
     #[arg(long)]
     pub focal_ratio: Option<f64>,
+    /// Turn off the three-view depth-consistency test (a pixel whose depths
+    /// from its forward and backward pairs disagree is moving; on by
+    /// default).
+    #[arg(long)]
+    pub no_three_view: bool,
     /// Turn off region completion (a segment of the flow field mostly
     /// called moving becomes moving as a whole, except its confidently
     /// static pixels; on by default).
@@ -122,6 +127,7 @@ pub fn run(args: &Args, ctx: &Ctx) -> anyhow::Result<serde_json::Value> {
         opts.focal_ratio = args.focal_ratio;
     }
     opts.regions.enabled &= !args.no_region_completion;
+    opts.labels.three_view &= !args.no_three_view;
     if let Some(k) = args.region_k {
         opts.regions.k = k;
     }
