@@ -594,6 +594,22 @@ mod tests {
     /// and a block of pixels on a walker moving the camera's way, faster:
     /// its flow stays on the epipolar lines. Sampson alone calls it static;
     /// with the cheirality test it is U, and the static scene stays clear.
+    /// Intrinsics (and inverse) of a `w × h` grid with focal `f`, principal
+    /// point at the centre, as `orient` builds them.
+    fn grid_camera(w: usize, h: usize, f: f64) -> (Matrix3<f64>, Matrix3<f64>) {
+        let k = crate::geometry::oriented::intrinsics(
+            f,
+            0.5 * (w as f64 - 1.0),
+            0.5 * (h as f64 - 1.0),
+        );
+        (k, k.try_inverse().unwrap())
+    }
+
+    /// Rotation by `a` rad about the y axis.
+    fn yaw(a: f64) -> Matrix3<f64> {
+        Matrix3::new(a.cos(), 0.0, a.sin(), 0.0, 1.0, 0.0, -a.sin(), 0.0, a.cos())
+    }
+
     /// Frames t−1, t, t+1 of a sideways dolly whose speed changes (camera
     /// at x = −0.06, 0, +0.10, small yaws) and a pedestrian walking against
     /// it (−0.1 per frame, depth 3): in both pairs its flow lies on the
@@ -602,15 +618,8 @@ mod tests {
     /// constant camera velocity they agree (the stated limit).
     fn three_view_scene(cb_x: f64) -> (Flow, Flow, Oriented, Oriented, Vec<bool>, Matrix3<f64>) {
         use nalgebra::Vector3;
-        let (w, h, focal) = (96usize, 64usize, 120.0);
-        let k = crate::geometry::oriented::intrinsics(
-            focal,
-            0.5 * (w as f64 - 1.0),
-            0.5 * (h as f64 - 1.0),
-        );
-        let ki = k.try_inverse().unwrap();
-        let yaw =
-            |a: f64| Matrix3::new(a.cos(), 0.0, a.sin(), 0.0, 1.0, 0.0, -a.sin(), 0.0, a.cos());
+        let (w, h) = (96usize, 64usize);
+        let (k, ki) = grid_camera(w, h, 120.0);
         let (rf, rb) = (yaw(0.004), yaw(-0.003));
         let (cf, cb) = (Vector3::new(0.10, 0.0, 0.0), Vector3::new(cb_x, 0.0, 0.0));
         let step = Vector3::new(-0.1, 0.0, 0.0);
@@ -728,16 +737,11 @@ mod tests {
 
     #[test]
     fn cheirality_flags_motion_along_epipolar_lines() {
-        use nalgebra::{Matrix3, Vector3};
-        let (w, h, focal) = (96usize, 64usize, 80.0);
-        let k = crate::geometry::oriented::intrinsics(
-            focal,
-            0.5 * (w as f64 - 1.0),
-            0.5 * (h as f64 - 1.0),
-        );
-        let ki = k.try_inverse().unwrap();
-        let a = 0.004f64;
-        let r = Matrix3::new(a.cos(), 0.0, a.sin(), 0.0, 1.0, 0.0, -a.sin(), 0.0, a.cos());
+        use nalgebra::Vector3;
+        let (w, h) = (96usize, 64usize);
+        let focal = 80.0;
+        let (k, ki) = grid_camera(w, h, focal);
+        let r = yaw(0.004);
         let t = Vector3::new(-0.08, 0.0, 0.0);
         let walker = |x: usize, y: usize| (40..56).contains(&x) && (20..50).contains(&y);
         let mut flow = Flow {
