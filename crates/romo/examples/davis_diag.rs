@@ -63,24 +63,16 @@ fn main() {
         .ok()
         .and_then(|s| s.parse().ok())
         .unwrap_or(usize::MAX);
-    let imgs = davis.join("JPEGImages/480p");
-    let mut seqs: Vec<_> = std::fs::read_dir(&imgs)
-        .unwrap()
-        .map(|e| e.unwrap().file_name().into_string().unwrap())
-        .collect();
-    seqs.sort();
+    let data = loader::davis::Davis::open(&davis, "480p").unwrap();
     let mut sums = [0.0f64; 4];
     let mut k = 0.0;
-    for s in seqs {
+    for s in data.sequences().unwrap() {
         if only.as_ref().is_some_and(|o| !o.contains(&s)) {
             continue;
         }
-        let mut paths: Vec<PathBuf> = std::fs::read_dir(imgs.join(&s))
-            .unwrap()
-            .map(|e| e.unwrap().path())
-            .collect();
-        paths.sort();
-        paths.truncate(maxf);
+        let mut frames = data.sequence(&s).unwrap().frames;
+        frames.truncate(maxf);
+        let paths: Vec<PathBuf> = frames.iter().map(|f| f.image.clone()).collect();
         let src = romo::scene::PathSource {
             paths: paths.clone(),
         };
@@ -88,17 +80,10 @@ fn main() {
         let flow = romo::flow::dis::Dis::new(opts.flow.clone());
         let t = std::time::Instant::now();
         // The ground truth (0 / 1) of every frame, at full resolution.
-        let gts: Vec<Plane> = paths
+        let gts: Vec<Plane> = frames
             .iter()
-            .map(|p| {
-                let name = p.file_stem().unwrap().to_string_lossy().into_owned();
-                let g = loader::io::read_gray8(
-                    davis
-                        .join("Annotations/480p")
-                        .join(&s)
-                        .join(format!("{name}.png")),
-                )
-                .unwrap();
+            .map(|f| {
+                let g = loader::io::read_gray8(f.annotation.as_ref().unwrap()).unwrap();
                 Plane {
                     w: g.width() as usize,
                     h: g.height() as usize,

@@ -27,23 +27,15 @@ fn main() {
             .unwrap_or(d)
     };
     let (maxf, step) = (env("MAXF", usize::MAX), env("STEP", 5));
-    let imgs = davis.join("JPEGImages/480p");
-    let mut seqs: Vec<_> = std::fs::read_dir(&imgs)
-        .unwrap()
-        .map(|e| e.unwrap().file_name().into_string().unwrap())
-        .collect();
-    seqs.sort();
+    let data = loader::davis::Davis::open(&davis, "480p").unwrap();
     let flow = romo::flow::dis::Dis::new(opts.flow.clone());
-    for s in seqs {
+    for s in data.sequences().unwrap() {
         if only.as_ref().is_some_and(|o| !o.contains(&s)) {
             continue;
         }
-        let mut paths: Vec<PathBuf> = std::fs::read_dir(imgs.join(&s))
-            .unwrap()
-            .map(|e| e.unwrap().path())
-            .collect();
-        paths.sort();
-        paths.truncate(maxf);
+        let mut frames = data.sequence(&s).unwrap().frames;
+        frames.truncate(maxf);
+        let paths: Vec<PathBuf> = frames.iter().map(|f| f.image.clone()).collect();
         let src = romo::scene::PathSource {
             paths: paths.clone(),
         };
@@ -56,14 +48,7 @@ fn main() {
             let fwd = flow.flow(&a, &b).unwrap().resize(gw, gh);
             let bwd = flow.flow(&b, &a).unwrap().resize(gw, gh);
             let valid = romo::labels::cycle_valid(&fwd, &bwd, &opts.labels);
-            let name = paths[p].file_stem().unwrap().to_string_lossy().into_owned();
-            let g = loader::io::read_gray8(
-                davis
-                    .join("Annotations/480p")
-                    .join(&s)
-                    .join(format!("{name}.png")),
-            )
-            .unwrap();
+            let g = loader::io::read_gray8(frames[p].annotation.as_ref().unwrap()).unwrap();
             let gtp = Plane {
                 w: g.width() as usize,
                 h: g.height() as usize,
