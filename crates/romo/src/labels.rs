@@ -391,7 +391,6 @@ pub const THREE_VIEW_MIN_PARALLAX_PX: f64 = 0.5;
 /// `parallax_f · |1 − ρ(x) / ρ̂|` px. NaN where a flow failed the cycle
 /// check, the parallax is below [`THREE_VIEW_MIN_PARALLAX_PX`] or a depth
 /// is not positive; None when fewer than 50 reference pixels qualify.
-#[allow(clippy::too_many_arguments)]
 pub fn three_view_residuals(
     fwd: &Flow,
     valid_f: &[bool],
