@@ -34,6 +34,27 @@ pub struct AdamUniforms {
     pub pad2: f32,
 }
 
+impl AdamUniforms {
+    /// Step `t` (1-based) of `cfg`: its betas, ε and bias corrections, with
+    /// the group fields (sizes, rates) zero for the caller to fill in.
+    pub fn for_step(cfg: &crate::train::adam::AdamConfig, t: i32) -> Self {
+        AdamUniforms {
+            n: 0,
+            stride: 0,
+            head: 0,
+            sparse_width: 0,
+            lr: 0.0,
+            lr_head: 0.0,
+            beta1: cfg.beta1,
+            beta2: cfg.beta2,
+            bc1: 1.0 - cfg.beta1.powi(t),
+            sbc2: (1.0 - cfg.beta2.powi(t)).sqrt(),
+            eps: cfg.eps,
+            pad2: 0.0,
+        }
+    }
+}
+
 pub static DECL: KernelDecl = KernelDecl {
     name: "adam",
     source: include_str!("../../../../shaders/splat/adam.wgsl"),

@@ -307,22 +307,8 @@ impl TrainBackend for GpuBackend {
             .record_reg(ctx, &mut rec, &st.params, &st.grads, &self.reg)?;
         // Adam, every group (dense, as torch, unless `sparse_adam`).
         st.step += 1;
-        let c = &self.adam_config;
         let t = st.step.min(i32::MAX as u64) as i32;
-        let base = AdamUniforms {
-            n: 0,
-            stride: 0,
-            head: 0,
-            sparse_width: 0,
-            lr: 0.0,
-            lr_head: 0.0,
-            beta1: c.beta1,
-            beta2: c.beta2,
-            bc1: 1.0 - c.beta1.powi(t),
-            sbc2: (1.0 - c.beta2.powi(t)).sqrt(),
-            eps: c.eps,
-            pad2: 0.0,
-        };
+        let base = AdamUniforms::for_step(&self.adam_config, t);
         let n = st.params.n;
         let k3 = crate::types::sh_coeffs(st.params.sh_degree) as u32 * 3;
         let lr = &input.lr;

@@ -29,12 +29,7 @@ fn adam_uniforms(
         sparse_width,
         lr,
         lr_head,
-        beta1: cfg.beta1,
-        beta2: cfg.beta2,
-        bc1: 1.0 - cfg.beta1.powi(t),
-        sbc2: (1.0 - cfg.beta2.powi(t)).sqrt(),
-        eps: cfg.eps,
-        pad2: 0.0,
+        ..AdamUniforms::for_step(cfg, t)
     }
 }
 
