@@ -12,7 +12,9 @@
 //! Environment: `REPS` (default 5), `PAIRS` (comma-separated name
 //! prefixes), `PRESET=large` (`DisOptions::large_motion()`), `DIS_OPTS` (a
 //! partial `DisOptions` JSON), `OPENCV=0` (skip OpenCV), `DUMP_DIR` (write
-//! our `.flo` files). Skips (prints a note) when the data is absent.
+//! our `.flo` files), `SIMD=baseline` (run our kernels' baseline x86-64
+//! copies even on an AVX2 CPU; `simd` in the JSON says which ran). Skips
+//! (prints a note) when the data is absent.
 #![allow(clippy::unwrap_used, clippy::expect_used)]
 
 use romo::flow::dis::{Dis, DisOptions, DisTimings};
@@ -167,6 +169,9 @@ fn main() {
         println!("{{\"skipped\": \"no sintel-flow data\"}}");
         return;
     }
+    if std::env::var("SIMD").is_ok_and(|v| v == "baseline") {
+        romo::flow::simd::force_baseline(true);
+    }
     let reps: usize = std::env::var("REPS")
         .ok()
         .and_then(|s| s.parse().ok())
@@ -270,6 +275,7 @@ fn main() {
     let out = json!({
         "method": "romo DIS vs OpenCV DIS MEDIUM (interleaved, per-pair medians, means over pairs)",
         "options": opts, "threads": rayon::current_num_threads(), "reps": reps,
+        "simd": if romo::flow::simd::avx2_active() { "avx2" } else { "baseline" },
         "opencv": match &cv { Ok(c) => json!({"available": true, "version": c.version, "threads": 2}),
                               Err(e) => json!({"available": false, "reason": e}) },
         "small": summary(true), "large": summary(false),

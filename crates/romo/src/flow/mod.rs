@@ -8,6 +8,7 @@
 pub mod dis;
 mod patch;
 pub mod pyramid;
+pub mod simd;
 mod sor;
 pub mod variational;
 

@@ -8,6 +8,7 @@
 //! handling; kernel sums are cached so no displacement is evaluated twice.
 
 use super::pyramid;
+use super::simd::multiversion;
 use crate::plane::Plane;
 
 /// Patch origins along one axis covering `[0, len)` completely.
@@ -268,61 +269,63 @@ pub(super) struct StripeCtx<'a> {
     pub(super) step: f32,
 }
 
-/// Two propagation + descent passes over one stripe of patch rows
-/// (`s` holds the stripe's flows, row-major, `nx` per row).
-pub(super) fn stripe<const P: usize>(ctx: &StripeCtx, first_row: usize, s: &mut [Cand]) {
-    let nx = ctx.nx;
-    let rows = s.len() / nx;
-    let img = ctx.img;
-    let pat = |k: usize| &ctx.patches[first_row * nx + k];
-    if ctx.search_radius > 0 {
-        for (k, c) in s.iter_mut().enumerate() {
-            *c = img.search::<P>(pat(k), *c, ctx.search_radius);
+multiversion! {
+    /// Two propagation + descent passes over one stripe of patch rows
+    /// (`s` holds the stripe's flows, row-major, `nx` per row).
+    pub(super) fn stripe<const P: usize>(ctx: &StripeCtx, first_row: usize, s: &mut [Cand]) {
+        let nx = ctx.nx;
+        let rows = s.len() / nx;
+        let img = ctx.img;
+        let pat = |k: usize| &ctx.patches[first_row * nx + k];
+        if ctx.search_radius > 0 {
+            for (k, c) in s.iter_mut().enumerate() {
+                *c = img.search::<P>(pat(k), *c, ctx.search_radius);
+            }
         }
-    }
-    let per_pass = (ctx.iters / 2).max(1);
-    let n = (P * P) as f32;
-    let cost = |m: &Sums| m[1] - m[0] * m[0] / n;
-    // Kernel sums at each patch's current flow, when known.
-    let mut known: Vec<Option<Sums>> = vec![None; s.len()];
-    for pass in 0..2 {
-        for ri in 0..rows {
-            for ci in 0..nx {
-                let (r, c) = if pass == 0 {
-                    (ri, ci)
-                } else {
-                    (rows - 1 - ri, nx - 1 - ci)
-                };
-                let k = r * nx + c;
-                let p = pat(k);
-                let own = known[k].unwrap_or_else(|| img.kernel::<P>(p, s[k].0, s[k].1));
-                let mut best = (cost(&own), s[k], own);
-                let mut try_cand = |j: usize| {
-                    // Equal flows have equal costs: skip the evaluation.
-                    if s[j] != best.1 {
-                        let m = img.kernel::<P>(p, s[j].0, s[j].1);
-                        let cj = cost(&m);
-                        if cj < best.0 {
-                            best = (cj, s[j], m);
+        let per_pass = (ctx.iters / 2).max(1);
+        let n = (P * P) as f32;
+        let cost = |m: &Sums| m[1] - m[0] * m[0] / n;
+        // Kernel sums at each patch's current flow, when known.
+        let mut known: Vec<Option<Sums>> = vec![None; s.len()];
+        for pass in 0..2 {
+            for ri in 0..rows {
+                for ci in 0..nx {
+                    let (r, c) = if pass == 0 {
+                        (ri, ci)
+                    } else {
+                        (rows - 1 - ri, nx - 1 - ci)
+                    };
+                    let k = r * nx + c;
+                    let p = pat(k);
+                    let own = known[k].unwrap_or_else(|| img.kernel::<P>(p, s[k].0, s[k].1));
+                    let mut best = (cost(&own), s[k], own);
+                    let mut try_cand = |j: usize| {
+                        // Equal flows have equal costs: skip the evaluation.
+                        if s[j] != best.1 {
+                            let m = img.kernel::<P>(p, s[j].0, s[j].1);
+                            let cj = cost(&m);
+                            if cj < best.0 {
+                                best = (cj, s[j], m);
+                            }
+                        }
+                    };
+                    if pass == 0 {
+                        if c > 0 {
+                            try_cand(k - 1);
+                        }
+                        if r > 0 {
+                            try_cand(k - nx);
+                        }
+                    } else {
+                        if c + 1 < nx {
+                            try_cand(k + 1);
+                        }
+                        if r + 1 < rows {
+                            try_cand(k + nx);
                         }
                     }
-                };
-                if pass == 0 {
-                    if c > 0 {
-                        try_cand(k - 1);
-                    }
-                    if r > 0 {
-                        try_cand(k - nx);
-                    }
-                } else {
-                    if c + 1 < nx {
-                        try_cand(k + 1);
-                    }
-                    if r + 1 < rows {
-                        try_cand(k + nx);
-                    }
+                    (s[k], known[k]) = img.align::<P>(p, best.1, best.2, per_pass, ctx.step);
                 }
-                (s[k], known[k]) = img.align::<P>(p, best.1, best.2, per_pass, ctx.step);
             }
         }
     }

@@ -8,6 +8,7 @@
 //! images run on the calling thread (below [`PAR_MIN_PIXELS`]).
 
 use super::Flow;
+use super::simd::multiversion;
 use crate::plane::Plane;
 use rayon::prelude::*;
 
@@ -50,41 +51,45 @@ where
     }
 }
 
-/// `scale` × the 2×2 box mean of `src` (size rounded up; an odd last
-/// column or row is replicated, as [`Plane::half`]).
-pub fn half(src: &Plane, scale: f32) -> Plane {
-    let (w, h) = (src.w, src.h);
-    let (nw, nh) = (w.div_ceil(2).max(1), h.div_ceil(2).max(1));
-    let mut out = vec![0.0f32; nw * nh];
-    let k = 0.25 * scale;
-    rows_mut(nw * nh >= PAR_MIN_PIXELS, &mut out, nw, |y, row| {
-        let r0 = &src.data[(2 * y).min(h - 1) * w..][..w];
-        let r1 = &src.data[(2 * y + 1).min(h - 1) * w..][..w];
-        let pairs = w / 2;
-        for (x, o) in row[..pairs].iter_mut().enumerate() {
-            *o = k * (r0[2 * x] + r0[2 * x + 1] + r1[2 * x] + r1[2 * x + 1]);
+multiversion! {
+    /// `scale` × the 2×2 box mean of `src` (size rounded up; an odd last
+    /// column or row is replicated, as [`Plane::half`]).
+    pub fn half(src: &Plane, scale: f32) -> Plane {
+        let (w, h) = (src.w, src.h);
+        let (nw, nh) = (w.div_ceil(2).max(1), h.div_ceil(2).max(1));
+        let mut out = vec![0.0f32; nw * nh];
+        let k = 0.25 * scale;
+        rows_mut(nw * nh >= PAR_MIN_PIXELS, &mut out, nw, |y, row| {
+            let r0 = &src.data[(2 * y).min(h - 1) * w..][..w];
+            let r1 = &src.data[(2 * y + 1).min(h - 1) * w..][..w];
+            let pairs = w / 2;
+            for (x, o) in row[..pairs].iter_mut().enumerate() {
+                *o = k * (r0[2 * x] + r0[2 * x + 1] + r1[2 * x] + r1[2 * x + 1]);
+            }
+            if pairs < nw {
+                row[pairs] = k * 2.0 * (r0[w - 1] + r1[w - 1]);
+            }
+        });
+        Plane {
+            w: nw,
+            h: nh,
+            data: out,
         }
-        if pairs < nw {
-            row[pairs] = k * 2.0 * (r0[w - 1] + r1[w - 1]);
-        }
-    });
-    Plane {
-        w: nw,
-        h: nh,
-        data: out,
     }
 }
 
-/// `scale` × `src` (a copy when `scale` is 1).
-pub fn scaled(src: &Plane, scale: f32) -> Plane {
-    let mut out = src.clone();
-    rows_mut(
-        src.w * src.h >= PAR_MIN_PIXELS,
-        &mut out.data,
-        src.w.max(1),
-        |_, r| r.iter_mut().for_each(|v| *v *= scale),
-    );
-    out
+multiversion! {
+    /// `scale` × `src` (a copy when `scale` is 1).
+    pub fn scaled(src: &Plane, scale: f32) -> Plane {
+        let mut out = src.clone();
+        rows_mut(
+            src.w * src.h >= PAR_MIN_PIXELS,
+            &mut out.data,
+            src.w.max(1),
+            |_, r| r.iter_mut().for_each(|v| *v *= scale),
+        );
+        out
+    }
 }
 
 /// Source index pair and weight of each output coordinate when resampling
@@ -100,45 +105,47 @@ fn taps(n: usize, m: usize) -> Vec<(usize, usize, f32)> {
         .collect()
 }
 
-/// Bilinear resize of a flow to `nw`×`nh`, vectors scaled by the size
-/// ratio. For enlarging or shrinking by at most 2× (more is delegated to
-/// [`Flow::resize`], which box-averages first).
-pub fn resize_flow(f: &Flow, nw: usize, nh: usize) -> Flow {
-    let (w, h) = (f.w(), f.h());
-    if (nw, nh) == (w, h) {
-        return f.clone();
-    }
-    if 2 * nw < w || 2 * nh < h {
-        return f.resize(nw, nh);
-    }
-    let (sx, sy) = (nw as f32 / w as f32, nh as f32 / h as f32);
-    let (cols, rows) = (taps(w, nw), taps(h, nh));
-    let mut out = Flow::zeros(nw, nh);
-    let body = |y: usize, ru: &mut [f32], rv: &mut [f32]| {
-        let (y0, y1, ay) = rows[y];
-        // Rows first (contiguous, vectorised), then columns via the table.
-        let mut tu = vec![0.0f32; w];
-        let mut tv = vec![0.0f32; w];
-        for (src, dst, s) in [(&f.u, &mut tu, sx), (&f.v, &mut tv, sy)] {
-            let (a, b) = (&src.data[y0 * w..][..w], &src.data[y1 * w..][..w]);
-            for ((d, p), q) in dst.iter_mut().zip(a).zip(b) {
-                *d = s * (p + ay * (q - p));
+multiversion! {
+    /// Bilinear resize of a flow to `nw`×`nh`, vectors scaled by the size
+    /// ratio. For enlarging or shrinking by at most 2× (more is delegated to
+    /// [`Flow::resize`], which box-averages first).
+    pub fn resize_flow(f: &Flow, nw: usize, nh: usize) -> Flow {
+        let (w, h) = (f.w(), f.h());
+        if (nw, nh) == (w, h) {
+            return f.clone();
+        }
+        if 2 * nw < w || 2 * nh < h {
+            return f.resize(nw, nh);
+        }
+        let (sx, sy) = (nw as f32 / w as f32, nh as f32 / h as f32);
+        let (cols, rows) = (taps(w, nw), taps(h, nh));
+        let mut out = Flow::zeros(nw, nh);
+        let body = |y: usize, ru: &mut [f32], rv: &mut [f32]| {
+            let (y0, y1, ay) = rows[y];
+            // Rows first (contiguous, vectorised), then columns via the table.
+            let mut tu = vec![0.0f32; w];
+            let mut tv = vec![0.0f32; w];
+            for (src, dst, s) in [(&f.u, &mut tu, sx), (&f.v, &mut tv, sy)] {
+                let (a, b) = (&src.data[y0 * w..][..w], &src.data[y1 * w..][..w]);
+                for ((d, p), q) in dst.iter_mut().zip(a).zip(b) {
+                    *d = s * (p + ay * (q - p));
+                }
             }
-        }
-        for (x, &(x0, x1, ax)) in cols.iter().enumerate() {
-            ru[x] = tu[x0] + ax * (tu[x1] - tu[x0]);
-            rv[x] = tv[x0] + ax * (tv[x1] - tv[x0]);
-        }
-    };
-    rows2_mut(
-        nw * nh >= PAR_MIN_PIXELS,
-        &mut out.u.data,
-        nw,
-        &mut out.v.data,
-        nw,
-        body,
-    );
-    out
+            for (x, &(x0, x1, ax)) in cols.iter().enumerate() {
+                ru[x] = tu[x0] + ax * (tu[x1] - tu[x0]);
+                rv[x] = tv[x0] + ax * (tv[x1] - tv[x0]);
+            }
+        };
+        rows2_mut(
+            nw * nh >= PAR_MIN_PIXELS,
+            &mut out.u.data,
+            nw,
+            &mut out.v.data,
+            nw,
+            body,
+        );
+        out
+    }
 }
 
 #[cfg(test)]

@@ -5,10 +5,12 @@
 //! ghost zones on large levels. Both schedules reproduce plain red–black
 //! SOR bit for bit (tests).
 
+use super::simd::multiversion;
 use super::variational::{A12, B1, B2, Ctx, EH, EV, IA11, IA22, L, NC, fld, ld, st};
 
 /// SOR update of colour `c`, padded row `py` (`own`: that row, `[u | v]`)
 /// reading the other colour's rows above, at and below (`nb`).
+#[inline(always)]
 fn sor_row(cx: &Ctx, co: &[Vec<f32>; 2], c: usize, py: usize, own: &mut [f32], nb: [&[f32]; 3]) {
     let (s, wr) = (cx.p.s, cx.p.wr);
     let omega = cx.o.omega;
@@ -58,6 +60,7 @@ struct Band<'a> {
 /// red row after the previous sweep's black rows around it, each black row
 /// after this sweep's red rows), while the ~`4k` rows in flight stay in
 /// cache. Rows outside the band are read from `halo`.
+#[inline(always)]
 fn sor_band(cx: &Ctx, co: &[Vec<f32>; 2], band: Band) {
     let s2 = 2 * cx.p.s;
     let Band { r0, rows, halo } = band;
@@ -97,55 +100,57 @@ fn sor_band(cx: &Ctx, co: &[Vec<f32>; 2], band: Band) {
     }
 }
 
-/// `sor_iters` SOR sweeps over the whole flow, exactly red–black SOR. On
-/// large levels the rows are cut into two bands processed in parallel;
-/// each band also sweeps a ghost zone of `2·sor_iters + 1` rows beyond its
-/// boundaries (the rows its own rows depend on within the sweeps: each
-/// sweep propagates two rows) starting from the same state, and keeps only
-/// its own rows, so the result does not depend on the banding.
-pub(super) fn sor(cx: &Ctx, co: &[Vec<f32>; 2], fl: &mut [Vec<f32>; 2]) {
-    let (h, s2) = (cx.p.h, 2 * cx.p.s);
-    if !cx.par || h < 4 {
-        let [f0, f1] = fl;
-        let halo = [
-            [f0[..s2].to_vec(), f0[(h + 1) * s2..].to_vec()],
-            [f1[..s2].to_vec(), f1[(h + 1) * s2..].to_vec()],
-        ];
-        let band = Band {
-            r0: 1,
-            rows: [&mut f0[s2..(h + 1) * s2], &mut f1[s2..(h + 1) * s2]],
-            halo,
-        };
-        sor_band(cx, co, band);
-        return;
-    }
-    let ghost = 2 * cx.o.sor_iters + 1;
-    let mid = 1 + h / 2;
-    let state: &[Vec<f32>; 2] = fl;
-    let run = |(r0, r1): (usize, usize)| {
-        let (a, b) = (r0.saturating_sub(ghost).max(1), (r1 + ghost).min(h + 1));
-        let mut bufs = [
-            state[0][a * s2..b * s2].to_vec(),
-            state[1][a * s2..b * s2].to_vec(),
-        ];
-        let row = |c: usize, r: usize| state[c][r * s2..][..s2].to_vec();
-        let halo = [[row(0, a - 1), row(0, b)], [row(1, a - 1), row(1, b)]];
-        {
-            let [b0, b1] = &mut bufs;
+multiversion! {
+    /// `sor_iters` SOR sweeps over the whole flow, exactly red–black SOR. On
+    /// large levels the rows are cut into two bands processed in parallel;
+    /// each band also sweeps a ghost zone of `2·sor_iters + 1` rows beyond its
+    /// boundaries (the rows its own rows depend on within the sweeps: each
+    /// sweep propagates two rows) starting from the same state, and keeps only
+    /// its own rows, so the result does not depend on the banding.
+    pub(super) fn sor(cx: &Ctx, co: &[Vec<f32>; 2], fl: &mut [Vec<f32>; 2]) {
+        let (h, s2) = (cx.p.h, 2 * cx.p.s);
+        if !cx.par || h < 4 {
+            let [f0, f1] = fl;
+            let halo = [
+                [f0[..s2].to_vec(), f0[(h + 1) * s2..].to_vec()],
+                [f1[..s2].to_vec(), f1[(h + 1) * s2..].to_vec()],
+            ];
             let band = Band {
-                r0: a,
-                rows: [b0, b1],
+                r0: 1,
+                rows: [&mut f0[s2..(h + 1) * s2], &mut f1[s2..(h + 1) * s2]],
                 halo,
             };
             sor_band(cx, co, band);
+            return;
         }
-        let keep = |v: &Vec<f32>| v[(r0 - a) * s2..(r1 - a) * s2].to_vec();
-        (r0, r1, [keep(&bufs[0]), keep(&bufs[1])])
-    };
-    let (top, bottom) = rayon::join(|| run((1, mid)), || run((mid, h + 1)));
-    for (r0, r1, rows) in [top, bottom] {
-        for (c, r) in rows.iter().enumerate() {
-            fl[c][r0 * s2..r1 * s2].copy_from_slice(r);
+        let ghost = 2 * cx.o.sor_iters + 1;
+        let mid = 1 + h / 2;
+        let state: &[Vec<f32>; 2] = fl;
+        let run = |(r0, r1): (usize, usize)| {
+            let (a, b) = (r0.saturating_sub(ghost).max(1), (r1 + ghost).min(h + 1));
+            let mut bufs = [
+                state[0][a * s2..b * s2].to_vec(),
+                state[1][a * s2..b * s2].to_vec(),
+            ];
+            let row = |c: usize, r: usize| state[c][r * s2..][..s2].to_vec();
+            let halo = [[row(0, a - 1), row(0, b)], [row(1, a - 1), row(1, b)]];
+            {
+                let [b0, b1] = &mut bufs;
+                let band = Band {
+                    r0: a,
+                    rows: [b0, b1],
+                    halo,
+                };
+                sor_band(cx, co, band);
+            }
+            let keep = |v: &Vec<f32>| v[(r0 - a) * s2..(r1 - a) * s2].to_vec();
+            (r0, r1, [keep(&bufs[0]), keep(&bufs[1])])
+        };
+        let (top, bottom) = rayon::join(|| run((1, mid)), || run((mid, h + 1)));
+        for (r0, r1, rows) in [top, bottom] {
+            for (c, r) in rows.iter().enumerate() {
+                fl[c][r0 * s2..r1 * s2].copy_from_slice(r);
+            }
         }
     }
 }

@@ -23,6 +23,7 @@
 
 use super::Flow;
 use super::pyramid::{PAR_MIN_PIXELS, rows_mut, rows2_mut};
+use super::simd::multiversion;
 use super::sor::sor;
 use crate::plane::Plane;
 use serde::{Deserialize, Serialize};
@@ -196,124 +197,128 @@ pub fn gradients(p: &Plane, par: bool) -> (Plane, Plane) {
     (pl(gx), pl(gy))
 }
 
-/// Central differences of a row-major `w`×`h` array (clamped borders) into
-/// `(gx, gy)`.
-fn grad(a: &[f32], w: usize, h: usize, par: bool) -> (Vec<f32>, Vec<f32>) {
-    let mut gx = vec![0.0f32; w * h];
-    let mut gy = vec![0.0f32; w * h];
-    rows2_mut(par, &mut gx, w, &mut gy, w, |y, rx, ry| {
-        let row = &a[y * w..][..w];
-        let up = &a[y.saturating_sub(1) * w..][..w];
-        let dn = &a[(y + 1).min(h - 1) * w..][..w];
-        for x in 0..w {
-            rx[x] = 0.5 * (row[(x + 1).min(w - 1)] - row[x.saturating_sub(1)]);
-        }
-        for ((o, d), u) in ry.iter_mut().zip(dn).zip(up) {
-            *o = 0.5 * (d - u);
-        }
-    });
-    (gx, gy)
+multiversion! {
+    /// Central differences of a row-major `w`×`h` array (clamped borders) into
+    /// `(gx, gy)`.
+    fn grad(a: &[f32], w: usize, h: usize, par: bool) -> (Vec<f32>, Vec<f32>) {
+        let mut gx = vec![0.0f32; w * h];
+        let mut gy = vec![0.0f32; w * h];
+        rows2_mut(par, &mut gx, w, &mut gy, w, |y, rx, ry| {
+            let row = &a[y * w..][..w];
+            let up = &a[y.saturating_sub(1) * w..][..w];
+            let dn = &a[(y + 1).min(h - 1) * w..][..w];
+            for x in 0..w {
+                rx[x] = 0.5 * (row[(x + 1).min(w - 1)] - row[x.saturating_sub(1)]);
+            }
+            for ((o, d), u) in ry.iter_mut().zip(dn).zip(up) {
+                *o = 0.5 * (d - u);
+            }
+        });
+        (gx, gy)
+    }
 }
 
-/// The linearised data terms, packed per colour. The second image and its
-/// first derivatives are warped with the flow (bilinear, clamped);
-/// `I_x, I_y` average the warped and the first image's derivatives,
-/// `I_z, I_xz, I_yz` are the warped minus the first image's values, and
-/// the second derivatives are central differences of `I_x, I_y`.
-fn linearise(
-    im: &Images,
-    flow: &Flow,
-    p: Packing,
-    o: &VariationalOptions,
-    par: bool,
-) -> [Vec<f32>; 2] {
-    let (w, h) = (p.w, p.h);
-    let (xm, ym) = ((w - 1) as f32, (h - 1) as f32);
-    // Rows of [I_x | I_y | I_z | I_xz | I_yz].
-    let mut d = vec![0.0f32; 5 * w * h];
-    rows_mut(par, &mut d, 5 * w, |y, row| {
-        let (jx, rest) = row.split_at_mut(w);
-        let (jy, rest) = rest.split_at_mut(w);
-        let (jz, rest) = rest.split_at_mut(w);
-        let (jxz, jyz) = rest.split_at_mut(w);
-        fn r(p: &Plane, y: usize) -> &[f32] {
-            &p.data[y * p.w..][..p.w]
-        }
-        let (fu, fv) = (r(&flow.u, y), r(&flow.v, y));
-        let (a, ax, ay) = (r(im.i0, y), r(im.i0x, y), r(im.i0y, y));
-        let (b, bx, by) = (&im.i1.data, &im.i1x.data, &im.i1y.data);
-        for x in 0..w {
-            // Clamped to the image, so the casts floor.
-            let fx = (x as f32 + fu[x]).clamp(0.0, xm);
-            let fy = (y as f32 + fv[x]).clamp(0.0, ym);
-            let (x0, y0) = (fx as usize, fy as usize);
-            let (tx, ty) = (fx - x0 as f32, fy - y0 as f32);
-            let (x1, y1) = ((x0 + 1).min(w - 1), (y0 + 1).min(h - 1));
-            let (i00, i01, i10, i11) = (y0 * w + x0, y0 * w + x1, y1 * w + x0, y1 * w + x1);
-            let (w00, w01) = ((1.0 - tx) * (1.0 - ty), tx * (1.0 - ty));
-            let (w10, w11) = ((1.0 - tx) * ty, tx * ty);
-            let s = |p: &[f32]| w00 * p[i00] + w01 * p[i01] + w10 * p[i10] + w11 * p[i11];
-            let (wb, wbx, wby) = (s(b), s(bx), s(by));
-            jx[x] = 0.5 * (wbx + ax[x]);
-            jy[x] = 0.5 * (wby + ay[x]);
-            jz[x] = wb - a[x];
-            jxz[x] = wbx - ax[x];
-            jyz[x] = wby - ay[x];
-        }
-    });
-    let mut st = [
-        vec![0.0f32; (h + 2) * NS * p.s],
-        vec![0.0f32; (h + 2) * NS * p.s],
-    ];
-    let [s0, s1] = &mut st;
-    let zeta_sq = o.zeta_sq;
-    let plane = |k: usize, y: usize| &d[(5 * y + k) * w..][..w];
-    rows2_mut(par, s0, NS * p.s, s1, NS * p.s, |py, r0, r1| {
-        if py == 0 || py > h {
-            return;
-        }
-        let y = py - 1;
-        let (yu, yd) = (y.saturating_sub(1), (y + 1).min(h - 1));
-        let (ix, iy, iz, ixz, iyz) = (
-            plane(0, y),
-            plane(1, y),
-            plane(2, y),
-            plane(3, y),
-            plane(4, y),
-        );
-        let (ixu, ixd, iyu, iyd) = (plane(0, yu), plane(0, yd), plane(1, yu), plane(1, yd));
-        let (fu, fv) = (&flow.u.data[y * w..][..w], &flow.v.data[y * w..][..w]);
-        for (c, row) in [r0, r1].into_iter().enumerate() {
-            let q = (y + c) & 1;
-            for j in 1..=p.wr {
-                let x = Packing::x(q, j);
-                if x >= w {
-                    continue;
-                }
-                let gxx = 0.5 * (ix[(x + 1).min(w - 1)] - ix[x.saturating_sub(1)]);
-                let gxy = 0.5 * (ixd[x] - ixu[x]);
-                let gyy = 0.5 * (iyd[x] - iyu[x]);
-                let (u0, v0) = (fu[x], fv[x]);
-                let vals = [
-                    ix[x],
-                    iy[x],
-                    iz[x] - ix[x] * u0 - iy[x] * v0,
-                    gxx,
-                    gxy,
-                    gyy,
-                    ixz[x] - gxx * u0 - gxy * v0,
-                    iyz[x] - gxy * u0 - gyy * v0,
-                    1.0 / (ix[x] * ix[x] + iy[x] * iy[x] + zeta_sq),
-                    1.0 / (gxx * gxx + gxy * gxy + zeta_sq),
-                    1.0 / (gxy * gxy + gyy * gyy + zeta_sq),
-                ];
-                for (f, v) in vals.into_iter().enumerate() {
-                    row[f * p.s + j] = v;
+multiversion! {
+    /// The linearised data terms, packed per colour. The second image and its
+    /// first derivatives are warped with the flow (bilinear, clamped);
+    /// `I_x, I_y` average the warped and the first image's derivatives,
+    /// `I_z, I_xz, I_yz` are the warped minus the first image's values, and
+    /// the second derivatives are central differences of `I_x, I_y`.
+    fn linearise(
+        im: &Images,
+        flow: &Flow,
+        p: Packing,
+        o: &VariationalOptions,
+        par: bool,
+    ) -> [Vec<f32>; 2] {
+        let (w, h) = (p.w, p.h);
+        let (xm, ym) = ((w - 1) as f32, (h - 1) as f32);
+        // Rows of [I_x | I_y | I_z | I_xz | I_yz].
+        let mut d = vec![0.0f32; 5 * w * h];
+        rows_mut(par, &mut d, 5 * w, |y, row| {
+            let (jx, rest) = row.split_at_mut(w);
+            let (jy, rest) = rest.split_at_mut(w);
+            let (jz, rest) = rest.split_at_mut(w);
+            let (jxz, jyz) = rest.split_at_mut(w);
+            fn r(p: &Plane, y: usize) -> &[f32] {
+                &p.data[y * p.w..][..p.w]
+            }
+            let (fu, fv) = (r(&flow.u, y), r(&flow.v, y));
+            let (a, ax, ay) = (r(im.i0, y), r(im.i0x, y), r(im.i0y, y));
+            let (b, bx, by) = (&im.i1.data, &im.i1x.data, &im.i1y.data);
+            for x in 0..w {
+                // Clamped to the image, so the casts floor.
+                let fx = (x as f32 + fu[x]).clamp(0.0, xm);
+                let fy = (y as f32 + fv[x]).clamp(0.0, ym);
+                let (x0, y0) = (fx as usize, fy as usize);
+                let (tx, ty) = (fx - x0 as f32, fy - y0 as f32);
+                let (x1, y1) = ((x0 + 1).min(w - 1), (y0 + 1).min(h - 1));
+                let (i00, i01, i10, i11) = (y0 * w + x0, y0 * w + x1, y1 * w + x0, y1 * w + x1);
+                let (w00, w01) = ((1.0 - tx) * (1.0 - ty), tx * (1.0 - ty));
+                let (w10, w11) = ((1.0 - tx) * ty, tx * ty);
+                let s = |p: &[f32]| w00 * p[i00] + w01 * p[i01] + w10 * p[i10] + w11 * p[i11];
+                let (wb, wbx, wby) = (s(b), s(bx), s(by));
+                jx[x] = 0.5 * (wbx + ax[x]);
+                jy[x] = 0.5 * (wby + ay[x]);
+                jz[x] = wb - a[x];
+                jxz[x] = wbx - ax[x];
+                jyz[x] = wby - ay[x];
+            }
+        });
+        let mut st = [
+            vec![0.0f32; (h + 2) * NS * p.s],
+            vec![0.0f32; (h + 2) * NS * p.s],
+        ];
+        let [s0, s1] = &mut st;
+        let zeta_sq = o.zeta_sq;
+        let plane = |k: usize, y: usize| &d[(5 * y + k) * w..][..w];
+        rows2_mut(par, s0, NS * p.s, s1, NS * p.s, |py, r0, r1| {
+            if py == 0 || py > h {
+                return;
+            }
+            let y = py - 1;
+            let (yu, yd) = (y.saturating_sub(1), (y + 1).min(h - 1));
+            let (ix, iy, iz, ixz, iyz) = (
+                plane(0, y),
+                plane(1, y),
+                plane(2, y),
+                plane(3, y),
+                plane(4, y),
+            );
+            let (ixu, ixd, iyu, iyd) = (plane(0, yu), plane(0, yd), plane(1, yu), plane(1, yd));
+            let (fu, fv) = (&flow.u.data[y * w..][..w], &flow.v.data[y * w..][..w]);
+            for (c, row) in [r0, r1].into_iter().enumerate() {
+                let q = (y + c) & 1;
+                for j in 1..=p.wr {
+                    let x = Packing::x(q, j);
+                    if x >= w {
+                        continue;
+                    }
+                    let gxx = 0.5 * (ix[(x + 1).min(w - 1)] - ix[x.saturating_sub(1)]);
+                    let gxy = 0.5 * (ixd[x] - ixu[x]);
+                    let gyy = 0.5 * (iyd[x] - iyu[x]);
+                    let (u0, v0) = (fu[x], fv[x]);
+                    let vals = [
+                        ix[x],
+                        iy[x],
+                        iz[x] - ix[x] * u0 - iy[x] * v0,
+                        gxx,
+                        gxy,
+                        gyy,
+                        ixz[x] - gxx * u0 - gxy * v0,
+                        iyz[x] - gxy * u0 - gyy * v0,
+                        1.0 / (ix[x] * ix[x] + iy[x] * iy[x] + zeta_sq),
+                        1.0 / (gxx * gxx + gxy * gxy + zeta_sq),
+                        1.0 / (gxy * gxy + gyy * gyy + zeta_sq),
+                    ];
+                    for (f, v) in vals.into_iter().enumerate() {
+                        row[f * p.s + j] = v;
+                    }
                 }
             }
-        }
-    });
-    st
+        });
+        st
+    }
 }
 
 /// Everything one fixed-point iteration reads.
@@ -327,121 +332,125 @@ pub(super) struct Ctx<'a> {
     pub(super) par: bool,
 }
 
-/// Robust smoothness weights `α/2 · Ψ'(|∇u|² + |∇v|²)` of the total flow
-/// (forward differences, zero at pad cells) of both colours, packed.
-/// `fl[c]` holds rows of `[u | v]`.
-fn smoothness(cx: &Ctx, fl: &[Vec<f32>; 2], ws: &mut [Vec<f32>; 2]) {
-    let (p, o) = (cx.p, cx.o);
-    let (s, h) = (p.s, p.h);
-    let eps2 = o.epsilon * o.epsilon;
-    let half_alpha = 0.5 * o.alpha;
-    let [w0, w1] = ws;
-    rows2_mut(cx.par, w0, s, w1, s, |py, r0, r1| {
-        if py == 0 || py > h {
-            return;
-        }
-        let y = py - 1;
-        let has_d = (y + 1 < h) as u8 as f32;
-        for (c, out) in [r0, r1].into_iter().enumerate() {
-            let q = (y + c) & 1;
-            let [valid, _, has_r] = &cx.masks[q];
-            let (me, ot) = (&fl[c], &fl[1 - c]);
-            let (mu, mv) = (fld(me, 2, s, py, 0), fld(me, 2, s, py, 1));
-            let (ou, ov) = (fld(ot, 2, s, py, 0), fld(ot, 2, s, py, 1));
-            let (du, dv) = (fld(ot, 2, s, py + 1, 0), fld(ot, 2, s, py + 1, 1));
-            for j in (1..=p.wr).step_by(L) {
-                let (vl, hr) = (ld(valid, j), ld(has_r, j));
-                let (tu, tv) = (ld(mu, j), ld(mv, j));
-                let (ru, rv) = (ld(ou, j + q), ld(ov, j + q));
-                let (du, dv) = (ld(du, j), ld(dv, j));
-                let mut r = [0.0f32; L];
-                for l in 0..L {
-                    let ux = hr[l] * (ru[l] - tu[l]);
-                    let vx = hr[l] * (rv[l] - tv[l]);
-                    let uy = has_d * (du[l] - tu[l]);
-                    let vy = has_d * (dv[l] - tv[l]);
-                    let n2 = ux * ux + uy * uy + vx * vx + vy * vy + eps2;
-                    r[l] = vl[l] * half_alpha / n2.sqrt();
-                }
-                st(out, j, r);
+multiversion! {
+    /// Robust smoothness weights `α/2 · Ψ'(|∇u|² + |∇v|²)` of the total flow
+    /// (forward differences, zero at pad cells) of both colours, packed.
+    /// `fl[c]` holds rows of `[u | v]`.
+    fn smoothness(cx: &Ctx, fl: &[Vec<f32>; 2], ws: &mut [Vec<f32>; 2]) {
+        let (p, o) = (cx.p, cx.o);
+        let (s, h) = (p.s, p.h);
+        let eps2 = o.epsilon * o.epsilon;
+        let half_alpha = 0.5 * o.alpha;
+        let [w0, w1] = ws;
+        rows2_mut(cx.par, w0, s, w1, s, |py, r0, r1| {
+            if py == 0 || py > h {
+                return;
             }
-        }
-    });
+            let y = py - 1;
+            let has_d = (y + 1 < h) as u8 as f32;
+            for (c, out) in [r0, r1].into_iter().enumerate() {
+                let q = (y + c) & 1;
+                let [valid, _, has_r] = &cx.masks[q];
+                let (me, ot) = (&fl[c], &fl[1 - c]);
+                let (mu, mv) = (fld(me, 2, s, py, 0), fld(me, 2, s, py, 1));
+                let (ou, ov) = (fld(ot, 2, s, py, 0), fld(ot, 2, s, py, 1));
+                let (du, dv) = (fld(ot, 2, s, py + 1, 0), fld(ot, 2, s, py + 1, 1));
+                for j in (1..=p.wr).step_by(L) {
+                    let (vl, hr) = (ld(valid, j), ld(has_r, j));
+                    let (tu, tv) = (ld(mu, j), ld(mv, j));
+                    let (ru, rv) = (ld(ou, j + q), ld(ov, j + q));
+                    let (du, dv) = (ld(du, j), ld(dv, j));
+                    let mut r = [0.0f32; L];
+                    for l in 0..L {
+                        let ux = hr[l] * (ru[l] - tu[l]);
+                        let vx = hr[l] * (rv[l] - tv[l]);
+                        let uy = has_d * (du[l] - tu[l]);
+                        let vy = has_d * (dv[l] - tv[l]);
+                        let n2 = ux * ux + uy * uy + vx * vx + vy * vy + eps2;
+                        r[l] = vl[l] * half_alpha / n2.sqrt();
+                    }
+                    st(out, j, r);
+                }
+            }
+        });
+    }
 }
 
-/// The SOR system of every cell of both colours for the current flow.
-fn coefficients(cx: &Ctx, fl: &[Vec<f32>; 2], ws: &[Vec<f32>; 2], co: &mut [Vec<f32>; 2]) {
-    let (p, o) = (cx.p, cx.o);
-    let (s, h) = (p.s, p.h);
-    let eps2 = o.epsilon * o.epsilon;
-    let (half_delta, half_gamma) = (0.5 * o.delta, 0.5 * o.gamma);
-    let [c0, c1] = co;
-    rows2_mut(cx.par, c0, NC * s, c1, NC * s, |py, r0, r1| {
-        if py == 0 || py > h {
-            return;
-        }
-        let y = py - 1;
-        let has_u = (y > 0) as u8 as f32;
-        let has_d = (y + 1 < h) as u8 as f32;
-        for (c, out) in [r0, r1].into_iter().enumerate() {
-            let q = (y + c) & 1;
-            let [valid, has_l, has_r] = &cx.masks[q];
-            let f = |k| fld(&cx.st[c], NS, s, py, k);
-            let (ix, iy, iz, ixx, ixy, iyy) = (f(IX), f(IY), f(IZ), f(IXX), f(IXY), f(IYY));
-            let (ixz, iyz, nis) = (f(IXZ), f(IYZ), f(NI));
-            let (ngxs, ngys) = (f(NGX), f(NGY));
-            let (mu, mv) = (fld(&fl[c], 2, s, py, 0), fld(&fl[c], 2, s, py, 1));
-            let wm = &ws[c][py * s..][..s];
-            let wo = &ws[1 - c];
-            let (woc, wou, wod) = (
-                &wo[py * s..][..s],
-                &wo[(py - 1) * s..][..s],
-                &wo[(py + 1) * s..][..s],
-            );
-            for j in (1..=p.wr).step_by(L) {
-                let (u, v) = (ld(mu, j), ld(mv, j));
-                let (ix, iy, iz) = (ld(ix, j), ld(iy, j), ld(iz, j));
-                let (ixx, ixy, iyy) = (ld(ixx, j), ld(ixy, j), ld(iyy, j));
-                let (ixz, iyz, nis) = (ld(ixz, j), ld(iyz, j), ld(nis, j));
-                let (ngx, ngy) = (ld(ngxs, j), ld(ngys, j));
-                let wm = ld(wm, j);
-                let (valid, has_l, has_r) = (ld(valid, j), ld(has_l, j), ld(has_r, j));
-                let (wol, wor) = (ld(woc, j + q - 1), ld(woc, j + q));
-                let (wou, wod) = (ld(wou, j), ld(wod, j));
-                let mut r = [[0.0f32; L]; NC];
-                for l in 0..L {
-                    let (gx, gy, gz) = (ix[l], iy[l], iz[l]);
-                    let ni = nis[l];
-                    let ri = gz + gx * u[l] + gy * v[l];
-                    let wi = half_delta * ni / (ri * ri * ni + eps2).sqrt();
-                    let (nx, ny) = (ngx[l], ngy[l]);
-                    let (gxx, gxy, gyy) = (ixx[l], ixy[l], iyy[l]);
-                    let rx = ixz[l] + gxx * u[l] + gxy * v[l];
-                    let ry = iyz[l] + gxy * u[l] + gyy * v[l];
-                    let wg = half_gamma / (rx * rx * nx + ry * ry * ny + eps2).sqrt();
-                    let (wx, wy) = (wg * nx, wg * ny);
-                    let a12 = wi * gx * gy + wx * gxx * gxy + wy * gxy * gyy;
-                    let a11 = wi * gx * gx + wx * gxx * gxx + wy * gxy * gxy;
-                    let a22 = wi * gy * gy + wx * gxy * gxy + wy * gyy * gyy;
-                    let wl = has_l[l] * 0.5 * (wm[l] + wol[l]);
-                    let wr = has_r[l] * 0.5 * (wm[l] + wor[l]);
-                    let wu = has_u * 0.5 * (wm[l] + wou[l]);
-                    let wd = has_d * 0.5 * (wm[l] + wod[l]);
-                    let sw = wl + wr + wu + wd;
-                    r[B1][l] = -wi * gx * gz - wx * gxx * ixz[l] - wy * gxy * iyz[l];
-                    r[B2][l] = -wi * gy * gz - wx * gxy * ixz[l] - wy * gyy * iyz[l];
-                    r[IA11][l] = valid[l] / (a11 + sw).max(1e-12);
-                    r[IA22][l] = valid[l] / (a22 + sw).max(1e-12);
-                    r[A12][l] = a12;
-                    r[EH][l] = wr;
-                    r[EV][l] = wd;
-                }
-                for (k, v) in r.into_iter().enumerate() {
-                    st(&mut out[k * s..(k + 1) * s], j, v);
+multiversion! {
+    /// The SOR system of every cell of both colours for the current flow.
+    fn coefficients(cx: &Ctx, fl: &[Vec<f32>; 2], ws: &[Vec<f32>; 2], co: &mut [Vec<f32>; 2]) {
+        let (p, o) = (cx.p, cx.o);
+        let (s, h) = (p.s, p.h);
+        let eps2 = o.epsilon * o.epsilon;
+        let (half_delta, half_gamma) = (0.5 * o.delta, 0.5 * o.gamma);
+        let [c0, c1] = co;
+        rows2_mut(cx.par, c0, NC * s, c1, NC * s, |py, r0, r1| {
+            if py == 0 || py > h {
+                return;
+            }
+            let y = py - 1;
+            let has_u = (y > 0) as u8 as f32;
+            let has_d = (y + 1 < h) as u8 as f32;
+            for (c, out) in [r0, r1].into_iter().enumerate() {
+                let q = (y + c) & 1;
+                let [valid, has_l, has_r] = &cx.masks[q];
+                let f = |k| fld(&cx.st[c], NS, s, py, k);
+                let (ix, iy, iz, ixx, ixy, iyy) = (f(IX), f(IY), f(IZ), f(IXX), f(IXY), f(IYY));
+                let (ixz, iyz, nis) = (f(IXZ), f(IYZ), f(NI));
+                let (ngxs, ngys) = (f(NGX), f(NGY));
+                let (mu, mv) = (fld(&fl[c], 2, s, py, 0), fld(&fl[c], 2, s, py, 1));
+                let wm = &ws[c][py * s..][..s];
+                let wo = &ws[1 - c];
+                let (woc, wou, wod) = (
+                    &wo[py * s..][..s],
+                    &wo[(py - 1) * s..][..s],
+                    &wo[(py + 1) * s..][..s],
+                );
+                for j in (1..=p.wr).step_by(L) {
+                    let (u, v) = (ld(mu, j), ld(mv, j));
+                    let (ix, iy, iz) = (ld(ix, j), ld(iy, j), ld(iz, j));
+                    let (ixx, ixy, iyy) = (ld(ixx, j), ld(ixy, j), ld(iyy, j));
+                    let (ixz, iyz, nis) = (ld(ixz, j), ld(iyz, j), ld(nis, j));
+                    let (ngx, ngy) = (ld(ngxs, j), ld(ngys, j));
+                    let wm = ld(wm, j);
+                    let (valid, has_l, has_r) = (ld(valid, j), ld(has_l, j), ld(has_r, j));
+                    let (wol, wor) = (ld(woc, j + q - 1), ld(woc, j + q));
+                    let (wou, wod) = (ld(wou, j), ld(wod, j));
+                    let mut r = [[0.0f32; L]; NC];
+                    for l in 0..L {
+                        let (gx, gy, gz) = (ix[l], iy[l], iz[l]);
+                        let ni = nis[l];
+                        let ri = gz + gx * u[l] + gy * v[l];
+                        let wi = half_delta * ni / (ri * ri * ni + eps2).sqrt();
+                        let (nx, ny) = (ngx[l], ngy[l]);
+                        let (gxx, gxy, gyy) = (ixx[l], ixy[l], iyy[l]);
+                        let rx = ixz[l] + gxx * u[l] + gxy * v[l];
+                        let ry = iyz[l] + gxy * u[l] + gyy * v[l];
+                        let wg = half_gamma / (rx * rx * nx + ry * ry * ny + eps2).sqrt();
+                        let (wx, wy) = (wg * nx, wg * ny);
+                        let a12 = wi * gx * gy + wx * gxx * gxy + wy * gxy * gyy;
+                        let a11 = wi * gx * gx + wx * gxx * gxx + wy * gxy * gxy;
+                        let a22 = wi * gy * gy + wx * gxy * gxy + wy * gyy * gyy;
+                        let wl = has_l[l] * 0.5 * (wm[l] + wol[l]);
+                        let wr = has_r[l] * 0.5 * (wm[l] + wor[l]);
+                        let wu = has_u * 0.5 * (wm[l] + wou[l]);
+                        let wd = has_d * 0.5 * (wm[l] + wod[l]);
+                        let sw = wl + wr + wu + wd;
+                        r[B1][l] = -wi * gx * gz - wx * gxx * ixz[l] - wy * gxy * iyz[l];
+                        r[B2][l] = -wi * gy * gz - wx * gxy * ixz[l] - wy * gyy * iyz[l];
+                        r[IA11][l] = valid[l] / (a11 + sw).max(1e-12);
+                        r[IA22][l] = valid[l] / (a22 + sw).max(1e-12);
+                        r[A12][l] = a12;
+                        r[EH][l] = wr;
+                        r[EV][l] = wd;
+                    }
+                    for (k, v) in r.into_iter().enumerate() {
+                        st(&mut out[k * s..(k + 1) * s], j, v);
+                    }
                 }
             }
-        }
-    });
+        });
+    }
 }
 
 /// Refine `flow` (from `im.i0` to `im.i1`) in place.
