@@ -13,7 +13,10 @@
 //! prefixes), `PRESET=large` (`DisOptions::large_motion()`), `DIS_OPTS` (a
 //! partial `DisOptions` JSON), `OPENCV=0` (skip OpenCV), `DUMP_DIR` (write
 //! our `.flo` files), `SIMD=baseline` (run our kernels' baseline x86-64
-//! copies even on an AVX2 CPU; `simd` in the JSON says which ran). Skips
+//! copies even on an AVX2 CPU; `simd` in the JSON says which ran),
+//! `SIMD=both` (each repetition also runs the baseline copies right before
+//! the AVX2 ones, asserts equal flows, and reports `baseline_ms` and
+//! `simd_speedup` = baseline / AVX2 time, medians paired per pair). Skips
 //! (prints a note) when the data is absent.
 #![allow(clippy::unwrap_used, clippy::expect_used)]
 
@@ -169,9 +172,11 @@ fn main() {
         println!("{{\"skipped\": \"no sintel-flow data\"}}");
         return;
     }
-    if std::env::var("SIMD").is_ok_and(|v| v == "baseline") {
+    let simd_mode = std::env::var("SIMD").unwrap_or_default();
+    if simd_mode == "baseline" {
         romo::flow::simd::force_baseline(true);
     }
+    let both = simd_mode == "both";
     let reps: usize = std::env::var("REPS")
         .ok()
         .and_then(|s| s.parse().ok())
@@ -207,9 +212,20 @@ fn main() {
         let mut ours = Vec::new();
         let mut theirs = Vec::new();
         let mut est = None;
+        let mut base_ms = Vec::new();
         for rep in 0..reps {
             let mut run_ours = || {
+                if both {
+                    romo::flow::simd::force_baseline(true);
+                    let (f, t) = dis.compute_timed(&a, &b).unwrap();
+                    romo::flow::simd::force_baseline(false);
+                    base_ms.push(t.total_ms);
+                    est = Some(f);
+                }
                 let (f, t) = dis.compute_timed(&a, &b).unwrap();
+                if let Some(e) = &est {
+                    assert!(e == &f, "baseline and AVX2 flows differ");
+                }
                 est = Some(f);
                 ours.push(t);
             };
@@ -236,6 +252,9 @@ fn main() {
             "epe_all": epe(&est, &gt, None), "epe_noc": epe(&est, &gt, Some(&noc)),
             "ms_median": ms, "stages_ms": stage_medians(&ours),
         });
+        if both {
+            row["baseline_ms_median"] = json!(median(base_ms));
+        }
         if let Some(last) = theirs.last() {
             let cms = median(theirs.iter().map(|r| r["ms"].as_f64().unwrap()).collect());
             row["opencv"] =
@@ -256,6 +275,7 @@ fn main() {
     let summary = |small: bool| {
         let ours_ms = mean(small, &|r| r["ms_median"].as_f64());
         let cv_ms = mean(small, &|r| r["opencv"]["ms_median"].as_f64());
+        let base_ms = mean(small, &|r| r["baseline_ms_median"].as_f64());
         let mut stages = serde_json::Map::new();
         if let Some(first) = rows.iter().find(|r| r["small_motion"] == small) {
             for k in first["stages_ms"].as_object().unwrap().keys() {
@@ -269,6 +289,8 @@ fn main() {
             "opencv": {"epe_all": mean(small, &|r| r["opencv"]["epe_all"].as_f64()),
                        "epe_noc": mean(small, &|r| r["opencv"]["epe_noc"].as_f64()), "ms": cv_ms},
             "ratio": ours_ms.zip(cv_ms).map(|(a, b)| a / b),
+            "baseline_ms": base_ms,
+            "simd_speedup": base_ms.zip(ours_ms).map(|(a, b)| a / b),
             "romo_stages_ms": stages,
         })
     };
