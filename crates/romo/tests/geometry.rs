@@ -123,23 +123,38 @@ fn lmeds_with_noise_and_half_outliers() {
 
 #[test]
 fn pure_rotation_selects_homography_and_translation_selects_f() {
-    let (a, b, _) = scene(300, true, 4);
-    let o = RobustOptions::default();
-    let (m, rep) = fit_two_view(&a, &b, &o).unwrap();
-    assert!(matches!(m, TwoView::Homography(_)), "rotation: {rep:?}");
-    assert!(rep.gric_h < rep.gric_f);
-    let (a, b, _) = scene(300, false, 5);
-    let (m, rep) = fit_two_view(&a, &b, &o).unwrap();
-    assert!(matches!(m, TwoView::Fundamental(_)), "translation: {rep:?}");
-    let ratio = RobustOptions {
-        selection: ModelSelection::InlierRatio,
+    // Both the default rule (inlier ratio) and GRIC: H for a pure rotation,
+    // F for a translation with depth variation.
+    let gric = RobustOptions {
+        selection: ModelSelection::Gric,
         ..Default::default()
     };
+    for o in [RobustOptions::default(), gric] {
+        let (a, b, _) = scene(300, true, 4);
+        let (m, rep) = fit_two_view(&a, &b, &o).unwrap();
+        assert!(matches!(m, TwoView::Homography(_)), "rotation: {rep:?}");
+        let (a, b, _) = scene(300, false, 5);
+        let (m, rep) = fit_two_view(&a, &b, &o).unwrap();
+        assert!(matches!(m, TwoView::Fundamental(_)), "translation: {rep:?}");
+        if o.selection == ModelSelection::Gric {
+            assert!(rep.gric_f < rep.gric_h, "{rep:?}");
+        }
+    }
+    assert_eq!(
+        RobustOptions::default().selection,
+        ModelSelection::InlierRatio
+    );
     let (a, b, _) = scene(300, true, 6);
     assert!(matches!(
-        fit_two_view(&a, &b, &ratio).unwrap().0,
+        fit_two_view(&a, &b, &RobustOptions::default()).unwrap().0,
         TwoView::Homography(_)
     ));
+    // A ratio above 1 is rejected.
+    let bad = RobustOptions {
+        h_inlier_ratio: 1.5,
+        ..Default::default()
+    };
+    assert!(fit_two_view(&a, &b, &bad).is_err());
 }
 
 #[test]

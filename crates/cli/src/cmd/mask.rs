@@ -45,9 +45,18 @@ pub struct Args {
     /// Random seed.
     #[arg(long, default_value_t = 0)]
     pub seed: u64,
-    /// Use F instead of GRIC's homography choice when F still labels at
-    /// least this fraction of a pair's points moving (default 0.005; 0 = pure
-    /// GRIC).
+    /// How each pair chooses between the fundamental matrix and a
+    /// homography (the low-parallax case): inlier-ratio (default; H when it
+    /// explains ≥ --h-inlier-ratio × F's inliers), gric (Torr 1998),
+    /// fundamental (always F, the paper) or homography (always H).
+    #[arg(long, value_enum)]
+    pub model_selection: Option<Selection>,
+    /// For --model-selection inlier-ratio: H is chosen when its inliers reach
+    /// this fraction of F's (default 0.9).
+    #[arg(long)]
+    pub h_inlier_ratio: Option<f64>,
+    /// Use F instead of the homography choice when F still labels at least
+    /// this fraction of a pair's points moving (default 0.005; 0 = off).
     #[arg(long)]
     pub f_informative_fraction: Option<f32>,
     /// Spread moving (U) labels along the flow to this many neighbouring
@@ -109,6 +118,12 @@ pub fn run(args: &Args, ctx: &Ctx) -> anyhow::Result<serde_json::Value> {
     opts.save_probabilities |= args.save_probabilities;
     opts.overlays |= args.overlays;
     opts.seed = args.seed;
+    if let Some(m) = args.model_selection {
+        opts.labels.robust.selection = m.into();
+    }
+    if let Some(r) = args.h_inlier_ratio {
+        opts.labels.robust.h_inlier_ratio = r;
+    }
     if let Some(f) = args.f_informative_fraction {
         opts.labels.f_informative_fraction = f;
     }
@@ -169,4 +184,29 @@ pub fn run(args: &Args, ctx: &Ctx) -> anyhow::Result<serde_json::Value> {
         report.dropped_frames.len()
     ));
     Ok(serde_json::to_value(&report)?)
+}
+
+/// `--model-selection` values.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, clap::ValueEnum)]
+pub enum Selection {
+    /// H when its inliers reach --h-inlier-ratio × F's.
+    InlierRatio,
+    /// Torr's GRIC.
+    Gric,
+    /// Always F.
+    Fundamental,
+    /// Always H.
+    Homography,
+}
+
+impl From<Selection> for romo::geometry::robust::ModelSelection {
+    fn from(s: Selection) -> Self {
+        use romo::geometry::robust::ModelSelection as M;
+        match s {
+            Selection::InlierRatio => M::InlierRatio,
+            Selection::Gric => M::Gric,
+            Selection::Fundamental => M::Fundamental,
+            Selection::Homography => M::Homography,
+        }
+    }
 }

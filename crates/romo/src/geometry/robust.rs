@@ -22,9 +22,15 @@ use serde::{Deserialize, Serialize};
 pub enum ModelSelection {
     /// Always the fundamental matrix (the paper).
     Fundamental,
-    /// GRIC: homography when GRIC(H) < GRIC(F) (default).
+    /// GRIC: homography when GRIC(H) < GRIC(F). Its capped penalty lets H
+    /// treat up to ~35% of the points as outliers, so it picks H for pairs
+    /// with real parallax (DAVIS goat: the near rocks then look moving).
     Gric,
-    /// Homography when its inlier count reaches `h_inlier_ratio` × F's.
+    /// Homography when its inlier count reaches `h_inlier_ratio` × F's
+    /// (default): H only where it explains nearly everything F does.
+    /// DAVIS 8 sequences, mean J 0.623 / 0.627 (two runs) against 0.558 /
+    /// 0.563 with GRIC (goat 0.04 → 0.51); the pure-rotation scene keeps H
+    /// for 21 of 23 pairs (test `pure_rotation_video_is_scored_with_homographies`).
     InlierRatio,
     /// Always the homography (diagnosis; a scene without parallax).
     Homography,
@@ -42,10 +48,10 @@ pub struct RobustOptions {
     /// Lower bound of σ̂ in px, so near-perfect data keep a sane threshold
     /// (default 0.25 px).
     pub min_sigma_px: f64,
-    /// Model selection rule (default GRIC).
+    /// Model selection rule (default inlier ratio).
     pub selection: ModelSelection,
     /// For `InlierRatio`: H is chosen when inliers(H) ≥ this × inliers(F)
-    /// (default 0.95).
+    /// (default 0.9).
     pub h_inlier_ratio: f64,
     /// RNG seed (default 0).
     pub seed: u64,
@@ -57,8 +63,8 @@ impl Default for RobustOptions {
             iterations: 500,
             inlier_sigmas: 2.5,
             min_sigma_px: 0.25,
-            selection: ModelSelection::Gric,
-            h_inlier_ratio: 0.95,
+            selection: ModelSelection::InlierRatio,
+            h_inlier_ratio: 0.9,
             seed: 0,
         }
     }
@@ -71,6 +77,12 @@ impl RobustOptions {
             return Err(crate::RomoError::Options(
                 "robust: iterations > 0, inlier_sigmas > 0, min_sigma_px >= 0 required".into(),
             ));
+        }
+        if !(self.h_inlier_ratio > 0.0 && self.h_inlier_ratio <= 1.0) {
+            return Err(crate::RomoError::Options(format!(
+                "robust: h_inlier_ratio must be in (0, 1], got {}",
+                self.h_inlier_ratio
+            )));
         }
         Ok(())
     }
