@@ -7,20 +7,40 @@
 
 use std::path::Path;
 
-#[test]
-fn small_scene_masks_match_ground_truth_motion() {
-    let spec_path = Path::new(env!("CARGO_MANIFEST_DIR")).join("../../scenes/small.toml");
+/// The first 24 frames of a built-in scene (`scenes/<toml>`), generated
+/// without supersampling into a temp folder, and the scene loaded from it.
+fn generate(toml: &str) -> (tempfile::TempDir, loader::scene::Scene) {
+    let spec_path = Path::new(env!("CARGO_MANIFEST_DIR"))
+        .join("../../scenes")
+        .join(toml);
     let mut spec = loader::synth::load_spec(&spec_path).unwrap();
     spec.frames = 24;
     spec.supersample = 1;
     let dir = tempfile::tempdir().unwrap();
     loader::synth::generate(&spec, dir.path()).unwrap();
     let scene = loader::scene::Scene::load(dir.path(), &Default::default()).unwrap();
-    let mut opts = romo::RomoOptions::default();
+    (dir, scene)
+}
+
+/// RoMo with `opts` (200 LMedS samples) on a generated scene, masks into
+/// `<dir>/out`; the report and the masks scored against `gt_motion/`.
+fn segment(
+    dir: &Path,
+    scene: &loader::scene::Scene,
+    mut opts: romo::RomoOptions,
+) -> (romo::RomoReport, romo::metrics::MaskMetrics) {
     opts.labels.robust.iterations = 200;
+    opts.out = Some(dir.join("out"));
+    let report = romo::segment_scene(scene, &opts, &|_, _, _| {}).unwrap();
+    let m = romo::metrics::evaluate_masks(&dir.join("out/masks"), &dir.join("gt_motion")).unwrap();
+    (report, m)
+}
+
+#[test]
+fn small_scene_masks_match_ground_truth_motion() {
+    let (dir, scene) = generate("small.toml");
     let out = dir.path().join("out");
-    opts.out = Some(out.clone());
-    let report = romo::segment_scene(&scene, &opts, &|_, _, _| {}).unwrap();
+    let (report, m) = segment(dir.path(), &scene, romo::RomoOptions::default());
     assert_eq!(report.frames.len(), 24);
     let u: f32 = report.frames.iter().map(|f| f.u_coverage).sum::<f32>() / 24.0;
     eprintln!(
@@ -36,8 +56,6 @@ fn small_scene_masks_match_ground_truth_motion() {
         "{:?}",
         report.rounds
     );
-    let m =
-        romo::metrics::evaluate_masks(&out.join("masks"), &dir.path().join("gt_motion")).unwrap();
     let s = &m.sequences[0];
     assert!(s.pred_convention.starts_with("keep"));
     eprintln!(
@@ -71,25 +89,12 @@ fn small_scene_masks_match_ground_truth_motion() {
     }
 }
 
-/// Run RoMo with `opts` on the first 24 frames of a built-in scene
-/// generated into a temp folder; (J, precision, recall, homography pairs).
-fn run_scene(toml: &str, mut opts: romo::RomoOptions) -> (f64, f64, f64, usize) {
-    let spec_path = Path::new(env!("CARGO_MANIFEST_DIR"))
-        .join("../../scenes")
-        .join(toml);
-    let mut spec = loader::synth::load_spec(&spec_path).unwrap();
-    spec.frames = 24;
-    spec.supersample = 1;
-    let dir = tempfile::tempdir().unwrap();
-    loader::synth::generate(&spec, dir.path()).unwrap();
-    let scene = loader::scene::Scene::load(dir.path(), &Default::default()).unwrap();
-    opts.labels.robust.iterations = 200;
-    let out = dir.path().join("out");
-    opts.out = Some(out.clone());
-    let report = romo::segment_scene(&scene, &opts, &|_, _, _| {}).unwrap();
+/// (J, precision, recall, homography pairs) of RoMo with `opts` on the
+/// first 24 frames of `scenes/<toml>`.
+fn run_scene(toml: &str, opts: romo::RomoOptions) -> (f64, f64, f64, usize) {
+    let (dir, scene) = generate(toml);
+    let (report, m) = segment(dir.path(), &scene, opts);
     let h = report.pairs.iter().filter(|p| p.model == "H").count();
-    let m =
-        romo::metrics::evaluate_masks(&out.join("masks"), &dir.path().join("gt_motion")).unwrap();
     (m.j_mean, m.precision, m.recall, h)
 }
 
