@@ -99,10 +99,10 @@ fn run_scene(toml: &str, opts: romo::RomoOptions) -> (f64, f64, f64, usize) {
 }
 
 /// The low-parallax case (issue item 5) on a video: a camera that only
-/// pans (`scenes/rotation.toml`). The default rule must choose the
-/// homography for most pairs and find the pedestrians; forcing the
-/// fundamental matrix (the paper) must do clearly worse, since a
-/// degenerate F absorbs their motion.
+/// pans (`scenes/rotation.toml`, one pedestrian). The default rule must
+/// choose the homography for most pairs and find the pedestrian; forcing
+/// the fundamental matrix (the paper) must do clearly worse, since a
+/// degenerate F absorbs its motion.
 #[test]
 fn pure_rotation_video_is_scored_with_homographies() {
     let (j, p, r, h) = run_scene("rotation.toml", romo::RomoOptions::default());
@@ -111,11 +111,11 @@ fn pure_rotation_video_is_scored_with_homographies() {
     f_only.labels.robust.selection = romo::geometry::robust::ModelSelection::Fundamental;
     let (jf, pf, rf, hf) = run_scene("rotation.toml", f_only);
     eprintln!("rotation, F only: J {jf:.3} P {pf:.3} R {rf:.3} H pairs {hf}/23");
-    // Measured 2026-11-22: default J 0.793 (P 0.83, R 0.89), H for 21 of
-    // 23 pairs; F only: J 0.177 (recall 0.04). The inlier-ratio rule at
-    // 0.95 chose H for 10 pairs only (J 0.590); GRIC for 22 (J 0.793).
+    // Measured 2026-11-22: default J 0.790 (P 0.85, R 0.89), H for 22 of
+    // 23 pairs; F only: J 0.418 (recall 0.38). The inlier-ratio rule at
+    // 0.95 chose H for 8 pairs only (J 0.579); GRIC for 22 (J 0.783).
     assert_eq!(hf, 0);
     assert!(h >= 18, "only {h} of 23 pairs chose H");
     assert!(j >= 0.7, "J {j} (precision {p}, recall {r})");
-    assert!(j >= jf + 0.3, "default J {j} vs F-only {jf}");
+    assert!(j >= jf + 0.25, "default J {j} vs F-only {jf}");
 }
