@@ -25,6 +25,10 @@ use serde::{Deserialize, Serialize};
 /// Hidden units (the paper's 8).
 pub const HIDDEN: usize = 8;
 
+/// Samples per partial gradient sum in [`Mlp::loss_grad`] (fixed, so the
+/// summation order never depends on the thread count or scheduling).
+const GRAD_CHUNK: usize = 1024;
+
 /// Training options. Paper defaults: Adam, lr 0.02, 25 epochs per round,
 /// τ² = 0.01. The Lipschitz weight, batch size and per-frame sampling are
 /// not stated in the paper; ours are documented here.
@@ -271,12 +275,15 @@ impl Mlp {
             .max(1) as f64;
         // Gradient w.r.t. effective weights: [Ŵ1, b1, Ŵ2, b2].
         let ne = HIDDEN * c + 2 * HIDDEN + 1;
-        let (loss, ge) = x
-            .par_chunks(c.max(1))
-            .zip(labels.par_iter())
-            .fold(
-                || (0.0f64, vec![0.0f64; ne]),
-                |(mut loss, mut g), (xi, lab)| {
+        // Partial sums over fixed chunks of samples, added in order: the
+        // result does not depend on how rayon splits the work, so training
+        // is reproducible run to run for a given seed.
+        let partials: Vec<(f64, Vec<f64>)> = x
+            .par_chunks(c.max(1) * GRAD_CHUNK)
+            .zip(labels.par_chunks(GRAD_CHUNK))
+            .map(|(xs, ls)| {
+                let (mut loss, mut g) = (0.0f64, vec![0.0f64; ne]);
+                for (xi, lab) in xs.chunks(c.max(1)).zip(ls) {
                     let mut z1 = [0.0f64; HIDDEN];
                     let mut z2 = b2;
                     for j in 0..HIDDEN {
@@ -312,16 +319,17 @@ impl Mlp {
                         }
                     }
                     g[o2 + HIDDEN] += dz2;
-                    (loss, g)
-                },
-            )
-            .reduce(
-                || (0.0, vec![0.0; ne]),
-                |(la, mut ga), (lb, gb)| {
+                }
+                (loss, g)
+            })
+            .collect();
+        let (loss, ge) =
+            partials
+                .into_iter()
+                .fold((0.0, vec![0.0; ne]), |(la, mut ga), (lb, gb)| {
                     ga.iter_mut().zip(&gb).for_each(|(a, b)| *a += b);
                     (la + lb, ga)
-                },
-            );
+                });
         let mut g = vec![0.0; n];
         let (c1, c2) = (self.p[n - 2], self.p[n - 1]);
         let (s1, s2) = (softplus(c1), softplus(c2));
