@@ -72,10 +72,13 @@ fn small_scene_masks_match_ground_truth_motion() {
     // the three-view test too (default on): J 0.590, P 0.87, R 0.56 (this
     // scene is seed-sensitive: seeds 1 / 2 give 0.602 / 0.492 with it,
     // 0.554 / 0.544 without; seed 0 is deterministic run to run).
+    // With L < 0.1·v (session 6; was 0.15·v) and the inlier-ratio model
+    // selection: J 0.718, P 0.85, R 0.76 (seed 0; bit-reproducible, also
+    // across thread counts, since training sums in a fixed order).
     // Thresholds a bit below the measurement.
     assert!(m.precision >= 0.6, "precision {}", m.precision);
     assert!(
-        m.j_mean >= 0.55,
+        m.j_mean >= 0.65,
         "J {} (precision {}, recall {})",
         m.j_mean,
         m.precision,
