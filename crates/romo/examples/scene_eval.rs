@@ -1,7 +1,8 @@
 //! Measurement (not a test): RoMo on a generated scene folder (`SCENE`,
 //! default /tmp/romo_demo; make one with `romosplat scene generate
 //! scenes/demo.toml --out DIR`), masks into `$OUT` (default
-//! `$SCENE/romo_eval`), J / precision / recall against `gt_motion/` and the
+//! `$SCENE/romo_eval`), J / precision / recall against `gt_motion/` (video
+//! frames only; the held-out `extra` views are left out) and the
 //! run's per-frame U/L coverage as JSON. `ROMO_OPTS` takes a partial
 //! `RomoOptions` JSON.
 #![allow(clippy::unwrap_used, clippy::expect_used)]
@@ -18,7 +19,22 @@ fn main() {
     let t = std::time::Instant::now();
     let rep = romo::segment_scene(&scene, &opts, &|_, _, _| {}).unwrap();
     let secs = t.elapsed().as_secs_f64();
-    let m = romo::metrics::evaluate_masks(&out.join("masks"), &dir.join("gt_motion")).unwrap();
+    // Score the video frames only: split.json's `extra` views are clean
+    // held-out images with empty ground truth and all-keep masks, which
+    // would each count as a perfect J of 1.
+    let extra: Vec<String> = scene
+        .split_indices("extra")
+        .into_iter()
+        .filter_map(|i| std::path::Path::new(&scene.frames[i].name).file_stem())
+        .map(|s| s.to_string_lossy().into_owned())
+        .collect();
+    let s = romo::metrics::evaluate_sequence_excluding(
+        &out.join("masks"),
+        &dir.join("gt_motion"),
+        "",
+        &extra,
+    )
+    .unwrap();
     let n = rep.frames.len().max(1) as f32;
     let u = rep.frames.iter().map(|f| f.u_coverage).sum::<f32>() / n;
     let l = rep.frames.iter().map(|f| f.l_coverage).sum::<f32>() / n;
@@ -26,14 +42,14 @@ fn main() {
     eprintln!(
         "{}: J {:.3} P {:.3} R {:.3} U {u:.4} L {l:.3} H-pairs {nh}/{} {secs:.1}s",
         dir.display(),
-        m.j_mean,
-        m.precision,
-        m.recall,
+        s.j_mean,
+        s.precision,
+        s.recall,
         rep.pairs.len()
     );
     println!(
         "{}",
-        serde_json::json!({"j": m.j_mean, "precision": m.precision, "recall": m.recall,
+        serde_json::json!({"j": s.j_mean, "precision": s.precision, "recall": s.recall,
             "u_cov": u, "l_cov": l, "h_pairs": nh, "seconds": secs, "timings_ms": rep.timings_ms})
     );
 }

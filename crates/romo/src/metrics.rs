@@ -96,12 +96,25 @@ fn read_moving(p: &Path, keep: bool, w: u32, h: u32) -> Result<Vec<bool>> {
 
 /// Evaluate one sequence: `gt` holds `<stem>.png`; `pred` holds predictions.
 pub fn evaluate_sequence(pred: &Path, gt: &Path, name: &str) -> Result<SequenceMetrics> {
+    evaluate_sequence_excluding(pred, gt, name, &[])
+}
+
+/// [`evaluate_sequence`] leaving out the ground-truth frames whose stem is
+/// in `exclude` (e.g. a scene's held-out `extra` views: empty ground truth
+/// and all-keep masks would each score a perfect J of 1).
+pub fn evaluate_sequence_excluding(
+    pred: &Path,
+    gt: &Path,
+    name: &str,
+    exclude: &[String],
+) -> Result<SequenceMetrics> {
     let pred = if pngs(pred)?.is_empty() && pred.join("masks").is_dir() {
         pred.join("masks")
     } else {
         pred.to_path_buf()
     };
-    let gts = pngs(gt)?;
+    let mut gts = pngs(gt)?;
+    gts.retain(|p| !exclude.contains(&stem_of(p)));
     if gts.is_empty() {
         return Err(RomoError::Input(format!(
             "{}: no ground-truth PNGs",
@@ -290,5 +303,12 @@ mod tests {
             assert!((s.j_decay - (0.8 - 1.0)).abs() < 1e-12);
         }
         assert!(evaluate_masks(&d.path().join("nope"), &gt).is_err());
+        // Leaving out frame 1 (an empty "held-out" frame scoring J = 1).
+        let s = evaluate_sequence_excluding(&pk, &gt, "", &["00001".to_string()]).unwrap();
+        assert_eq!(s.frames, 1);
+        assert!((s.j_mean - 0.8).abs() < 1e-12);
+        // Leaving out everything is an error, not a J of nothing.
+        let all = ["00000".to_string(), "00001".to_string()];
+        assert!(evaluate_sequence_excluding(&pk, &gt, "", &all).is_err());
     }
 }

@@ -28,11 +28,26 @@ fn segment(
     dir: &Path,
     scene: &loader::scene::Scene,
     mut opts: romo::RomoOptions,
-) -> (romo::RomoReport, romo::metrics::MaskMetrics) {
+) -> (romo::RomoReport, romo::metrics::SequenceMetrics) {
     opts.labels.robust.iterations = 200;
     opts.out = Some(dir.join("out"));
     let report = romo::segment_scene(scene, &opts, &|_, _, _| {}).unwrap();
-    let m = romo::metrics::evaluate_masks(&dir.join("out/masks"), &dir.join("gt_motion")).unwrap();
+    // The video frames only: the held-out `extra` views have empty ground
+    // truth and all-keep masks, a perfect J of 1 each.
+    let extra: Vec<String> = scene
+        .split_indices("extra")
+        .into_iter()
+        .filter_map(|i| Path::new(&scene.frames[i].name).file_stem())
+        .map(|s| s.to_string_lossy().into_owned())
+        .collect();
+    let m = romo::metrics::evaluate_sequence_excluding(
+        &dir.join("out/masks"),
+        &dir.join("gt_motion"),
+        "",
+        &extra,
+    )
+    .unwrap();
+    assert_eq!(m.frames, 24);
     (report, m)
 }
 
@@ -56,8 +71,7 @@ fn small_scene_masks_match_ground_truth_motion() {
         "{:?}",
         report.rounds
     );
-    let s = &m.sequences[0];
-    assert!(s.pred_convention.starts_with("keep"));
+    assert!(m.pred_convention.starts_with("keep"));
     eprintln!(
         "small scene: J {:.3} P {:.3} R {:.3}",
         m.j_mean, m.precision, m.recall
@@ -73,12 +87,14 @@ fn small_scene_masks_match_ground_truth_motion() {
     // scene is seed-sensitive: seeds 1 / 2 give 0.602 / 0.492 with it,
     // 0.554 / 0.544 without; seed 0 is deterministic run to run).
     // With L < 0.1·v (session 6; was 0.15·v) and the inlier-ratio model
-    // selection: J 0.718, P 0.85, R 0.76 (seed 0; bit-reproducible, also
-    // across thread counts, since training sums in a fixed order).
+    // selection: J 0.672, P 0.85, R 0.76 over the 24 video frames (seed 0;
+    // bit-reproducible, also across thread counts, since training sums in
+    // a fixed order). The numbers above, and 0.718 before session 6's fix,
+    // also counted the 4 held-out views (J 1 each).
     // Thresholds a bit below the measurement.
     assert!(m.precision >= 0.6, "precision {}", m.precision);
     assert!(
-        m.j_mean >= 0.65,
+        m.j_mean >= 0.62,
         "J {} (precision {}, recall {})",
         m.j_mean,
         m.precision,
@@ -114,9 +130,11 @@ fn pure_rotation_video_is_scored_with_homographies() {
     f_only.labels.robust.selection = romo::geometry::robust::ModelSelection::Fundamental;
     let (jf, pf, rf, hf) = run_scene("rotation.toml", f_only);
     eprintln!("rotation, F only: J {jf:.3} P {pf:.3} R {rf:.3} H pairs {hf}/23");
-    // Measured 2026-11-22: default J 0.790 (P 0.85, R 0.89), H for 22 of
-    // 23 pairs; F only: J 0.418 (recall 0.38). The inlier-ratio rule at
-    // 0.95 chose H for 8 pairs only (J 0.579); GRIC for 22 (J 0.783).
+    // Measured 2026-11-22 over the 24 video frames: default J 0.769 (P 0.84,
+    // R 0.90), H for 22 of 23 pairs; F only: J 0.373 (recall 0.39). With
+    // the 2 held-out views counted (J 1 each): default 0.787 (0.790 before
+    // L < 0.1·v), F only 0.418, the inlier-ratio rule at 0.95 0.579 (H for
+    // 8 pairs only), GRIC 0.783 (22).
     assert_eq!(hf, 0);
     assert!(h >= 18, "only {h} of 23 pairs chose H");
     assert!(j >= 0.7, "J {j} (precision {p}, recall {r})");
