@@ -216,6 +216,16 @@ pub fn evaluate_sequence_excluding(
 /// one sequence; when it holds sub-folders (DAVIS `Annotations/480p/`), each
 /// sub-folder with a same-named prediction folder is a sequence.
 pub fn evaluate_masks(pred_dir: &Path, gt_dir: &Path) -> Result<MaskMetrics> {
+    evaluate_masks_excluding(pred_dir, gt_dir, &[])
+}
+
+/// [`evaluate_masks`] leaving out, in every sequence, the ground-truth
+/// frames whose stem is in `exclude` (see [`evaluate_sequence_excluding`]).
+pub fn evaluate_masks_excluding(
+    pred_dir: &Path,
+    gt_dir: &Path,
+    exclude: &[String],
+) -> Result<MaskMetrics> {
     if !gt_dir.is_dir() {
         return Err(RomoError::Input(format!(
             "{}: ground-truth folder not found",
@@ -229,7 +239,7 @@ pub fn evaluate_masks(pred_dir: &Path, gt_dir: &Path) -> Result<MaskMetrics> {
         )));
     }
     let sequences = if !pngs(gt_dir)?.is_empty() {
-        vec![evaluate_sequence(pred_dir, gt_dir, "")?]
+        vec![evaluate_sequence_excluding(pred_dir, gt_dir, "", exclude)?]
     } else {
         let mut v = Vec::new();
         for g in subdirs(gt_dir) {
@@ -239,7 +249,7 @@ pub fn evaluate_masks(pred_dir: &Path, gt_dir: &Path) -> Result<MaskMetrics> {
                 .unwrap_or_default();
             let p = pred_dir.join(&name);
             if p.is_dir() {
-                v.push(evaluate_sequence(&p, &g, &name)?);
+                v.push(evaluate_sequence_excluding(&p, &g, &name, exclude)?);
             }
         }
         if v.is_empty() {

@@ -1,5 +1,6 @@
-//! `romosplat eval masks --pred DIR --gt DIR`: DAVIS J (per-frame IoU, mean,
-//! recall, decay) and pixel precision / recall of predicted motion masks.
+//! `romosplat eval masks --pred DIR --gt DIR [--scene DIR]`: DAVIS J
+//! (per-frame IoU, mean, recall, decay) and pixel precision / recall of
+//! predicted motion masks; `--scene` leaves out its held-out `extra` views.
 
 use crate::Ctx;
 use std::path::PathBuf;
@@ -14,11 +15,34 @@ pub struct Args {
     /// Ground truth, 255 = moving (`gt_motion/`, or DAVIS `Annotations/480p[/seq]`).
     #[arg(long)]
     pub gt: PathBuf,
+    /// A scene folder whose split.json `extra` views (held-out clean test
+    /// views) are left out: their all-keep masks and empty ground truth
+    /// would each count as a perfect frame (J = 1).
+    #[arg(long)]
+    pub scene: Option<PathBuf>,
 }
 
 /// Run `romosplat eval masks`.
 pub fn run(args: &Args, ctx: &Ctx) -> anyhow::Result<serde_json::Value> {
-    let m = romo::metrics::evaluate_masks(&args.pred, &args.gt)?;
+    let exclude: Vec<String> = match &args.scene {
+        Some(dir) => {
+            let scene = loader::scene::Scene::load(dir, &Default::default())?;
+            scene
+                .split_indices("extra")
+                .into_iter()
+                .filter_map(|i| std::path::Path::new(&scene.frames[i].name).file_stem())
+                .map(|s| s.to_string_lossy().into_owned())
+                .collect()
+        }
+        None => Vec::new(),
+    };
+    if !exclude.is_empty() {
+        ctx.info(format!(
+            "leaving out {} held-out view(s) listed as `extra` in split.json",
+            exclude.len()
+        ));
+    }
+    let m = romo::metrics::evaluate_masks_excluding(&args.pred, &args.gt, &exclude)?;
     for s in &m.sequences {
         ctx.info(format!(
             "{:<16} frames {:>4}  J {:.3}  J-recall {:.3}  decay {:+.3}  precision {:.3}  recall {:.3}  (read predictions as {})",
