@@ -22,19 +22,7 @@ fn main() {
     // Score the video frames only: split.json's `extra` views are clean
     // held-out images with empty ground truth and all-keep masks, which
     // would each count as a perfect J of 1.
-    let extra: Vec<String> = scene
-        .split_indices("extra")
-        .into_iter()
-        .filter_map(|i| std::path::Path::new(&scene.frames[i].name).file_stem())
-        .map(|s| s.to_string_lossy().into_owned())
-        .collect();
-    let s = romo::metrics::evaluate_sequence_excluding(
-        &out.join("masks"),
-        &dir.join("gt_motion"),
-        "",
-        &extra,
-    )
-    .unwrap();
+    let s = romo::evaluate_scene_masks(&scene, &out.join("masks")).unwrap();
     let n = rep.frames.len().max(1) as f32;
     let u = rep.frames.iter().map(|f| f.u_coverage).sum::<f32>() / n;
     let l = rep.frames.iter().map(|f| f.l_coverage).sum::<f32>() / n;

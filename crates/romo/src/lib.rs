@@ -27,4 +27,4 @@ pub use pipeline::{
     FeatureBackend, FlowBackend, FrameReport, FrameSource, RomoOptions, RomoReport, Segmentation,
     segment_frames,
 };
-pub use scene::{segment_paths, segment_scene};
+pub use scene::{evaluate_scene_masks, held_out_stems, segment_paths, segment_scene};

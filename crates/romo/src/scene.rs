@@ -88,6 +88,34 @@ pub fn make_flow(o: &RomoOptions) -> Result<Box<dyn FlowEstimator>> {
     }
 }
 
+/// File stems of a scene's held-out views (split.json `extra`), the frames
+/// to leave out when scoring its masks (see
+/// [`crate::metrics::evaluate_masks_excluding`]): they get all-keep masks
+/// and have empty ground truth, a perfect J of 1 each.
+pub fn held_out_stems(scene: &loader::scene::Scene) -> Vec<String> {
+    scene
+        .split_indices("extra")
+        .into_iter()
+        .filter_map(|i| Path::new(&scene.frames[i].name).file_stem())
+        .map(|s| s.to_string_lossy().into_owned())
+        .collect()
+}
+
+/// Score a scene's masks (`masks_dir`, e.g. `masks/` written by
+/// [`segment_scene`]) against its `gt_motion/`, over the video frames only
+/// (without [`held_out_stems`]).
+pub fn evaluate_scene_masks(
+    scene: &loader::scene::Scene,
+    masks_dir: &Path,
+) -> Result<crate::metrics::SequenceMetrics> {
+    crate::metrics::evaluate_sequence_excluding(
+        masks_dir,
+        &scene.root.join("gt_motion"),
+        "",
+        &held_out_stems(scene),
+    )
+}
+
 /// Run RoMo on a loaded scene; writes into `opts.out` or the scene folder.
 ///
 /// The video is the scene's frames minus split.json's `extra` views: those

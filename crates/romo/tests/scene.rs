@@ -34,19 +34,7 @@ fn segment(
     let report = romo::segment_scene(scene, &opts, &|_, _, _| {}).unwrap();
     // The video frames only: the held-out `extra` views have empty ground
     // truth and all-keep masks, a perfect J of 1 each.
-    let extra: Vec<String> = scene
-        .split_indices("extra")
-        .into_iter()
-        .filter_map(|i| Path::new(&scene.frames[i].name).file_stem())
-        .map(|s| s.to_string_lossy().into_owned())
-        .collect();
-    let m = romo::metrics::evaluate_sequence_excluding(
-        &dir.join("out/masks"),
-        &dir.join("gt_motion"),
-        "",
-        &extra,
-    )
-    .unwrap();
+    let m = romo::evaluate_scene_masks(scene, &dir.join("out/masks")).unwrap();
     assert_eq!(m.frames, 24);
     (report, m)
 }

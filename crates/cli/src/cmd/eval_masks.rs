@@ -27,12 +27,7 @@ pub fn run(args: &Args, ctx: &Ctx) -> anyhow::Result<serde_json::Value> {
     let exclude: Vec<String> = match &args.scene {
         Some(dir) => {
             let scene = loader::scene::Scene::load(dir, &Default::default())?;
-            scene
-                .split_indices("extra")
-                .into_iter()
-                .filter_map(|i| std::path::Path::new(&scene.frames[i].name).file_stem())
-                .map(|s| s.to_string_lossy().into_owned())
-                .collect()
+            romo::held_out_stems(&scene)
         }
         None => Vec::new(),
     };
