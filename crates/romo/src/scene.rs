@@ -96,8 +96,11 @@ pub fn held_out_stems(scene: &loader::scene::Scene) -> Vec<String> {
     scene
         .split_indices("extra")
         .into_iter()
-        .filter_map(|i| Path::new(&scene.frames[i].name).file_stem())
-        .map(|s| s.to_string_lossy().into_owned())
+        .filter_map(|i| {
+            // The stem of the ground-truth file the loader names for it.
+            let gt = loader::masks::gt_motion_path(Path::new(""), &scene.frames[i].name);
+            gt.file_stem().map(|s| s.to_string_lossy().into_owned())
+        })
         .collect()
 }
 
