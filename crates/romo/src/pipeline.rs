@@ -72,7 +72,10 @@ pub struct RomoOptions {
     pub grid_max_side: usize,
     /// Flow is computed on frames of `flow_scale` × the grid (default 2).
     pub flow_scale: usize,
-    /// Built-in flow parameters (DIS).
+    /// Built-in flow parameters (DIS; default [`DisOptions::masks`], finer
+    /// than OpenCV's MEDIUM). A partial `flow` object in JSON overrides
+    /// fields of that preset, not of `DisOptions::default()`.
+    #[serde(deserialize_with = "flow_over_mask_preset")]
     pub flow: DisOptions,
     /// Flow estimator (default: the built-in DIS).
     pub flow_backend: FlowBackend,
@@ -115,7 +118,7 @@ impl Default for RomoOptions {
         Self {
             grid_max_side: 256,
             flow_scale: 2,
-            flow: DisOptions::default(),
+            flow: DisOptions::masks(),
             flow_backend: FlowBackend::Dis,
             labels: LabelOptions::default(),
             mlp: MlpOptions::default(),
@@ -131,6 +134,34 @@ impl Default for RomoOptions {
             overlays: false,
         }
     }
+}
+
+/// Deserialise a (partial) `flow` object over [`DisOptions::masks`]:
+/// serde's own defaulting would fill the missing fields from
+/// `DisOptions::default()` (OpenCV's MEDIUM) and silently drop the preset.
+fn flow_over_mask_preset<'de, D: serde::Deserializer<'de>>(
+    d: D,
+) -> std::result::Result<DisOptions, D::Error> {
+    use serde::de::Error;
+    fn merge(base: &mut serde_json::Value, patch: serde_json::Value) {
+        match (base, patch) {
+            (serde_json::Value::Object(b), serde_json::Value::Object(p)) => {
+                for (k, v) in p {
+                    match b.get_mut(&k) {
+                        Some(slot) => merge(slot, v),
+                        None => {
+                            b.insert(k, v);
+                        }
+                    }
+                }
+            }
+            (slot, v) => *slot = v,
+        }
+    }
+    let patch = serde_json::Value::deserialize(d)?;
+    let mut base = serde_json::to_value(DisOptions::masks()).map_err(D::Error::custom)?;
+    merge(&mut base, patch);
+    serde_json::from_value(base).map_err(D::Error::custom)
 }
 
 impl RomoOptions {
@@ -684,4 +715,32 @@ pub fn segment_frames_with_labels(
         l: l_all,
         report,
     })
+}
+
+#[cfg(test)]
+mod tests {
+    #![allow(clippy::unwrap_used, clippy::expect_used)]
+    use super::*;
+
+    /// A partial `flow` object changes only the fields it names: the rest
+    /// stay at the mask stage's preset, not at `DisOptions::default()`.
+    #[test]
+    fn partial_flow_options_override_the_mask_preset() {
+        let preset = DisOptions::masks();
+        assert_ne!(preset.finest_scale, DisOptions::default().finest_scale);
+        let o: RomoOptions = serde_json::from_str("{}").unwrap();
+        assert_eq!(o.flow.finest_scale, preset.finest_scale);
+        assert_eq!(o.flow.patch_stride, preset.patch_stride);
+        let o: RomoOptions =
+            serde_json::from_str(r#"{"flow":{"patch_size":6,"variational":{"sor_iters":7}}}"#)
+                .unwrap();
+        assert_eq!(o.flow.patch_size, 6);
+        assert_eq!(o.flow.variational.sor_iters, 7);
+        assert_eq!(o.flow.finest_scale, preset.finest_scale);
+        assert_eq!(o.flow.patch_stride, preset.patch_stride);
+        assert_eq!(o.flow.variational.alpha, preset.variational.alpha);
+        let o: RomoOptions = serde_json::from_str(r#"{"flow":{"finest_scale":1}}"#).unwrap();
+        assert_eq!(o.flow.finest_scale, 1);
+        assert!(serde_json::from_str::<RomoOptions>(r#"{"flow":{"patch_size":"big"}}"#).is_err());
+    }
 }

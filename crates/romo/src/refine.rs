@@ -52,7 +52,7 @@ impl Default for RefineOptions {
             radius: 8,
             eps: 1e-3,
             subsample: 4,
-            static_veto_factor: 0.05,
+            static_veto_factor: 0.02,
             threshold: 0.5,
             temporal_weight: 0.25,
             temporal_along_flow: true,

@@ -105,6 +105,27 @@ impl Default for DisOptions {
 }
 
 impl DisOptions {
+    /// The mask stage's preset (`RomoOptions::default().flow`): the
+    /// defaults with the finest level computed at full resolution
+    /// (`finest_scale` 0) and patches every 2 px (`patch_stride` 2). The
+    /// pipeline runs DIS on frames of twice its working grid, so MEDIUM's
+    /// half-resolution finest level only resolves the grid itself; thin and
+    /// repetitively textured movers (the demo's striped and checked
+    /// pedestrians) then get flow smoothed into the background, and
+    /// labels and region completion lose them. Measured (session 7): demo
+    /// scene J, seeds 0 / 1 / 2, 0.759 / 0.770 / 0.764 → 0.820 / 0.797 /
+    /// 0.804 (finest level alone: 0.793 for seed 0; stride 1 0.802, patch 6
+    /// 0.812, patch 12 0.798, frames at 3× the grid 0.810); DAVIS mean J
+    /// 0.639 → 0.652 (camel 0.72 → 0.80, car-roundabout 0.74 → 0.79,
+    /// parkour 0.81 → 0.68). Costs ≈ 2.5× the flow time.
+    pub fn masks() -> Self {
+        Self {
+            finest_scale: 0,
+            patch_stride: 2,
+            ..Self::default()
+        }
+    }
+
     /// Preset for large motion (Sintel ambush/market, 30–70 px): the
     /// defaults with damped descent steps (`descent_step` 0.125, which need
     /// the full 25 Gauss–Newton iterations at every level) and the
