@@ -116,8 +116,9 @@ impl DisOptions {
     /// scene J, seeds 0 / 1 / 2, 0.759 / 0.770 / 0.764 → 0.820 / 0.797 /
     /// 0.804 (finest level alone: 0.793 for seed 0; stride 1 0.802, patch 6
     /// 0.812, patch 12 0.798, frames at 3× the grid 0.810); DAVIS mean J
-    /// 0.639 → 0.652 (camel 0.72 → 0.80, car-roundabout 0.74 → 0.79,
-    /// parkour 0.81 → 0.68). Costs ≈ 2.5× the flow time.
+    /// 0.639 → 0.652 for seed 0 (camel 0.72 → 0.80, car-roundabout 0.74 →
+    /// 0.79; parkour 0.81 → 0.68 for this seed, 0.83 for seeds 1 and 2).
+    /// Costs ≈ 8× the flow time (DAVIS 854×480: 9 → 71–98 ms per frame).
     pub fn masks() -> Self {
         Self {
             finest_scale: 0,
