@@ -176,8 +176,7 @@ fn main() {
                 let _ = std::fs::create_dir_all(&d);
                 img.save(format!("{d}/{s}_{i:03}.png")).unwrap();
             }
-            let full =
-                romo::refine::upsample_probability(&seg.probs[i], &frame.gray(), &opts.refine);
+            let full = romo::refine::upsample_probability(&seg.probs[i], &frame, &opts.refine);
             fc.add(
                 &full.data.iter().map(|v| *v > thr).collect::<Vec<_>>(),
                 &gt_full,

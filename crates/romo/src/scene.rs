@@ -202,8 +202,7 @@ fn segment_source(
         .into_par_iter()
         .try_for_each(|i| -> Result<()> {
             let frame = src.frame(i)?;
-            let guide = frame.gray();
-            let prob = upsample_probability(&seg.probs[i], &guide, &opts.refine);
+            let prob = upsample_probability(&seg.probs[i], &frame, &opts.refine);
             let keep = to_keep_mask(&prob, opts.refine.threshold);
             loader::masks::write_mask(loader::masks::mask_path(&masks_dir, &names[i]), &keep)?;
             if opts.overlays {
