@@ -30,8 +30,8 @@ pub enum ModelSelection {
     /// (default): H only where it explains nearly everything F does.
     /// DAVIS 8 sequences (with L < 0.15·v), mean J 0.623 / 0.627 (two
     /// runs) against 0.558 / 0.563 with GRIC (goat 0.04 → 0.51); the
-    /// pure-rotation scene keeps H
-    /// for 22 of 23 pairs (test `pure_rotation_video_is_scored_with_homographies`).
+    /// pure-rotation scene keeps H for 22 of 23 pairs (test
+    /// `pure_rotation_video_is_scored_with_homographies`).
     InlierRatio,
     /// Always the homography (diagnosis; a scene without parallax).
     Homography,
