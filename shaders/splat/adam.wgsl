@@ -23,12 +23,8 @@ struct AdamUniforms {
     pad2: f32,
 }
 
-@group(0) @binding(0) var<uniform> u: AdamUniforms;
-@group(0) @binding(1) var<storage, read_write> params: array<f32>;
-@group(0) @binding(2) var<storage, read> grads: array<f32>;
-@group(0) @binding(3) var<storage, read_write> exp_avg: array<f32>;
-@group(0) @binding(4) var<storage, read_write> exp_avg_sq: array<f32>;
-@group(0) @binding(5) var<storage, read> projected: array<ProjectedSplat>;
+// Bindings and injected constants: the `kernel!` declaration in
+// crates/splat/src/gpu/adam.rs.
 
 // k mod d without an integer division (CPU drivers scalarise vector
 // divisions): a float quotient estimate, off by at most (k/d)·2⁻²² + 1,
@@ -50,10 +46,10 @@ fn divmod(k: u32, d: u32) -> vec2<u32> {
     return vec2<u32>(q, r);
 }
 
-@compute @workgroup_size(256)
+@compute @workgroup_size(WORKGROUP_SIZE)
 fn adam_main(@builtin(workgroup_id) wid: vec3<u32>, @builtin(num_workgroups) nwg: vec3<u32>,
              @builtin(local_invocation_index) lid: u32) {
-    let k = linear_index(wid, nwg, lid, 256u);
+    let k = linear_index(wid, nwg, lid, WORKGROUP_SIZE);
     if (k >= u.n) {
         return;
     }

@@ -4,18 +4,13 @@
 // (NDC units, so INRIA's 2e-4 threshold applies), count += 1,
 // max_radius = max(max_radius, radius); and a count of visible splats.
 
-@group(0) @binding(0) var<uniform> cam: CameraUniforms;
-@group(0) @binding(1) var<storage, read> projected: array<ProjectedSplat>;
-@group(0) @binding(2) var<storage, read> v_proj: array<f32>;
-@group(0) @binding(3) var<storage, read_write> grad_accum: array<f32>;
-@group(0) @binding(4) var<storage, read_write> vis_count: array<u32>;
-@group(0) @binding(5) var<storage, read_write> max_radius: array<f32>;
-@group(0) @binding(6) var<storage, read_write> visible: atomic<u32>;
+// Bindings and injected constants: the `kernel!` declaration in
+// crates/splat/src/gpu/densify_stats.rs.
 
-@compute @workgroup_size(256)
+@compute @workgroup_size(WORKGROUP_SIZE)
 fn densify_stats_main(@builtin(workgroup_id) wid: vec3<u32>, @builtin(num_workgroups) nwg: vec3<u32>,
                       @builtin(local_invocation_index) lid: u32) {
-    let i = linear_index(wid, nwg, lid, 256u);
+    let i = linear_index(wid, nwg, lid, WORKGROUP_SIZE);
     if (i >= cam.n) {
         return;
     }

@@ -11,19 +11,13 @@ struct BinUniforms {
     pad: u32,
 }
 
-@group(0) @binding(0) var<uniform> u: BinUniforms;
-@group(0) @binding(1) var<storage, read> projected: array<ProjectedSplat>;
-@group(0) @binding(2) var<storage, read_write> depth_keys_out: array<u32>;
-@group(0) @binding(3) var<storage, read_write> order: array<u32>;
-@group(0) @binding(4) var<storage, read_write> counts: array<u32>;
-@group(0) @binding(5) var<storage, read> offsets: array<u32>;
-@group(0) @binding(6) var<storage, read_write> tile_keys: array<u32>;
-@group(0) @binding(7) var<storage, read_write> tile_values: array<u32>;
+// Bindings and injected constants: the `kernel!` declaration in
+// crates/splat/src/gpu/emit_keys.rs.
 
-@compute @workgroup_size(256)
+@compute @workgroup_size(WORKGROUP_SIZE)
 fn depth_keys(@builtin(workgroup_id) wid: vec3<u32>, @builtin(num_workgroups) nwg: vec3<u32>,
               @builtin(local_invocation_index) lid: u32) {
-    let i = linear_index(wid, nwg, lid, 256u);
+    let i = linear_index(wid, nwg, lid, WORKGROUP_SIZE);
     if (i >= u.n) {
         return;
     }
@@ -36,20 +30,20 @@ fn depth_keys(@builtin(workgroup_id) wid: vec3<u32>, @builtin(num_workgroups) nw
     order[i] = i;
 }
 
-@compute @workgroup_size(256)
+@compute @workgroup_size(WORKGROUP_SIZE)
 fn gather_counts(@builtin(workgroup_id) wid: vec3<u32>, @builtin(num_workgroups) nwg: vec3<u32>,
                  @builtin(local_invocation_index) lid: u32) {
-    let i = linear_index(wid, nwg, lid, 256u);
+    let i = linear_index(wid, nwg, lid, WORKGROUP_SIZE);
     if (i >= u.n) {
         return;
     }
     counts[i] = tile_count(projected[order[i]], vec2<u32>(u.grid_x, u.grid_y));
 }
 
-@compute @workgroup_size(256)
+@compute @workgroup_size(WORKGROUP_SIZE)
 fn emit(@builtin(workgroup_id) wid: vec3<u32>, @builtin(num_workgroups) nwg: vec3<u32>,
         @builtin(local_invocation_index) lid: u32) {
-    let i = linear_index(wid, nwg, lid, 256u);
+    let i = linear_index(wid, nwg, lid, WORKGROUP_SIZE);
     if (i >= u.n) {
         return;
     }

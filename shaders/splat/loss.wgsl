@@ -15,21 +15,17 @@ struct LossUniforms {
     pad4: f32,
 }
 
-@group(0) @binding(0) var<uniform> u: LossUniforms;
-@group(0) @binding(1) var<storage, read> image: array<f32>;
-@group(0) @binding(2) var<storage, read> target_rgb: array<f32>;
-@group(0) @binding(3) var<storage, read> mask: array<f32>;
-@group(0) @binding(4) var<storage, read_write> v_image: array<f32>;
-@group(0) @binding(5) var<storage, read_write> partials: array<f32>;
+// Bindings and injected constants: the `kernel!` declaration in
+// crates/splat/src/gpu/loss.rs.
 
-var<workgroup> s_l1: array<f32, 256>;
-var<workgroup> s_se: array<f32, 256>;
+var<workgroup> s_l1: array<f32, WORKGROUP_SIZE>;
+var<workgroup> s_se: array<f32, WORKGROUP_SIZE>;
 
-@compute @workgroup_size(256)
+@compute @workgroup_size(WORKGROUP_SIZE)
 fn l1_grad(@builtin(workgroup_id) wid: vec3<u32>, @builtin(num_workgroups) nwg: vec3<u32>,
            @builtin(local_invocation_index) lid: u32) {
     let block = wid.y * nwg.x + wid.x;
-    let i = block * 256u + lid;
+    let i = block * WORKGROUP_SIZE + lid;
     var l1 = 0.0;
     var se = 0.0;
     if (i < u.n_pixels) {

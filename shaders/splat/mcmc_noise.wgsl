@@ -16,11 +16,8 @@ struct McmcNoiseUniforms {
     pad2: f32,
 }
 
-@group(0) @binding(0) var<uniform> u: McmcNoiseUniforms;
-@group(0) @binding(1) var<storage, read_write> means: array<f32>;
-@group(0) @binding(2) var<storage, read> log_scales: array<f32>;
-@group(0) @binding(3) var<storage, read> rotations: array<f32>;
-@group(0) @binding(4) var<storage, read> opacity_logits: array<f32>;
+// Bindings and injected constants: the `kernel!` declaration in
+// crates/splat/src/gpu/mcmc.rs.
 
 // PCG-RXS-M-XS hash (Jarzynski & Olano 2020), u32 arithmetic wraps.
 fn pcg_hash(v: u32) -> u32 {
@@ -34,10 +31,10 @@ fn unit_from_hash(h: u32) -> f32 {
     return f32((h >> 8u) + 1u) * (1.0 / 16777216.0);
 }
 
-@compute @workgroup_size(256)
+@compute @workgroup_size(WORKGROUP_SIZE)
 fn mcmc_noise_main(@builtin(workgroup_id) wid: vec3<u32>, @builtin(num_workgroups) nwg: vec3<u32>,
                    @builtin(local_invocation_index) lid: u32) {
-    let i = linear_index(wid, nwg, lid, 256u);
+    let i = linear_index(wid, nwg, lid, WORKGROUP_SIZE);
     if (i >= u.n) {
         return;
     }

@@ -18,16 +18,13 @@ struct McmcRegUniforms {
     pad4: f32,
 }
 
-@group(0) @binding(0) var<uniform> u: McmcRegUniforms;
-@group(0) @binding(1) var<storage, read> log_scales: array<f32>;
-@group(0) @binding(2) var<storage, read> opacity_logits: array<f32>;
-@group(0) @binding(3) var<storage, read_write> grad_log_scales: array<f32>;
-@group(0) @binding(4) var<storage, read_write> grad_opacity_logits: array<f32>;
+// Bindings and injected constants: the `kernel!` declaration in
+// crates/splat/src/gpu/mcmc.rs.
 
-@compute @workgroup_size(256)
+@compute @workgroup_size(WORKGROUP_SIZE)
 fn mcmc_reg_main(@builtin(workgroup_id) wid: vec3<u32>, @builtin(num_workgroups) nwg: vec3<u32>,
                  @builtin(local_invocation_index) lid: u32) {
-    let i = linear_index(wid, nwg, lid, 256u);
+    let i = linear_index(wid, nwg, lid, WORKGROUP_SIZE);
     if (i >= u.n) {
         return;
     }

@@ -10,26 +10,23 @@ struct ScanUniforms {
     pad2: u32,
 }
 
-@group(0) @binding(0) var<uniform> u: ScanUniforms;
-@group(0) @binding(1) var<storage, read> input: array<u32>;
-@group(0) @binding(2) var<storage, read_write> output: array<u32>;
-@group(0) @binding(3) var<storage, read_write> block_sums: array<u32>;
+// Bindings and injected constants: the `kernel!` declaration in
+// crates/splat/src/gpu/prefix_sum.rs.
 
-const SCAN_WG: u32 = 256u;
-var<workgroup> tmp: array<u32, 256>;
+var<workgroup> tmp: array<u32, WORKGROUP_SIZE>;
 
-@compute @workgroup_size(256)
+@compute @workgroup_size(WORKGROUP_SIZE)
 fn scan_blocks(@builtin(workgroup_id) wid: vec3<u32>, @builtin(num_workgroups) nwg: vec3<u32>,
                @builtin(local_invocation_index) lid: u32) {
     let block = wid.y * nwg.x + wid.x;
-    let i = block * SCAN_WG + lid;
+    let i = block * WORKGROUP_SIZE + lid;
     var v = 0u;
     if (i < u.n) {
         v = input[i];
     }
     tmp[lid] = v;
     workgroupBarrier();
-    for (var off = 1u; off < SCAN_WG; off = off * 2u) {
+    for (var off = 1u; off < WORKGROUP_SIZE; off = off * 2u) {
         var add = 0u;
         if (lid >= off) {
             add = tmp[lid - off];
@@ -41,17 +38,17 @@ fn scan_blocks(@builtin(workgroup_id) wid: vec3<u32>, @builtin(num_workgroups) n
     if (i < u.n) {
         output[i] = tmp[lid] - v;
     }
-    if (lid == SCAN_WG - 1u) {
+    if (lid == WORKGROUP_SIZE - 1u) {
         block_sums[block] = tmp[lid];
     }
 }
 
 // output[i] += block_sums[block of i] (block_sums already scanned, exclusive).
-@compute @workgroup_size(256)
+@compute @workgroup_size(WORKGROUP_SIZE)
 fn add_block_offsets(@builtin(workgroup_id) wid: vec3<u32>, @builtin(num_workgroups) nwg: vec3<u32>,
                      @builtin(local_invocation_index) lid: u32) {
     let block = wid.y * nwg.x + wid.x;
-    let i = block * SCAN_WG + lid;
+    let i = block * WORKGROUP_SIZE + lid;
     if (i < u.n) {
         output[i] = output[i] + block_sums[block];
     }

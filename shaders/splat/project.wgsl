@@ -3,18 +3,13 @@
 // The math lives in common.wgsl (`project_geometry`, `sh_basis`) and follows
 // `reference::project::project_one`; culled splats are written as all zeros.
 
-@group(0) @binding(0) var<uniform> cam: CameraUniforms;
-@group(0) @binding(1) var<storage, read> means: array<f32>;
-@group(0) @binding(2) var<storage, read> log_scales: array<f32>;
-@group(0) @binding(3) var<storage, read> rotations: array<f32>;
-@group(0) @binding(4) var<storage, read> opacity_logits: array<f32>;
-@group(0) @binding(5) var<storage, read> sh: array<f32>;
-@group(0) @binding(6) var<storage, read_write> projected: array<ProjectedSplat>;
+// Bindings and injected constants: the `kernel!` declaration in
+// crates/splat/src/gpu/project.rs.
 
-@compute @workgroup_size(256)
+@compute @workgroup_size(WORKGROUP_SIZE)
 fn project_main(@builtin(workgroup_id) wid: vec3<u32>, @builtin(num_workgroups) nwg: vec3<u32>,
                 @builtin(local_invocation_index) lid: u32) {
-    let i = linear_index(wid, nwg, lid, 256u);
+    let i = linear_index(wid, nwg, lid, WORKGROUP_SIZE);
     if (i >= cam.n) {
         return;
     }

@@ -6,19 +6,12 @@
 // compensation), conic → Σ2 → (J, Σ3) → camera-space mean (clamped J as
 // gsplat), Σ3 → scales and the normalised quaternion. Culled splats get 0.
 
-@group(0) @binding(0) var<uniform> cam: CameraUniforms;
-@group(0) @binding(1) var<storage, read> means: array<f32>;
-@group(0) @binding(2) var<storage, read> log_scales: array<f32>;
-@group(0) @binding(3) var<storage, read> rotations: array<f32>;
-@group(0) @binding(4) var<storage, read> opacity_logits: array<f32>;
-@group(0) @binding(5) var<storage, read> sh: array<f32>;
-@group(0) @binding(6) var<storage, read> v_proj: array<f32>;
+// Bindings and injected constants: the `kernel!` declaration in
+// crates/splat/src/gpu/project_backward.rs.
 // The geometry gradients share one planar buffer (so the kernel binds 8
 // storage buffers, the GL fallback's per-stage limit): means [0, 3n),
 // log-scales [3n, 6n), rotations [6n, 10n), opacity logits [10n, 11n),
 // ‖dL/d mean2d‖ [11n, 12n). The host copies the segments out.
-@group(0) @binding(7) var<storage, read_write> g_geom: array<f32>;
-@group(0) @binding(8) var<storage, read_write> g_sh: array<f32>;
 
 fn set_mean(i: u32, a: u32, v: f32) { g_geom[3u * i + a] = v; }
 fn set_log_scale(i: u32, a: u32, v: f32) { g_geom[3u * cam.n + 3u * i + a] = v; }
@@ -41,10 +34,10 @@ fn write_zero(i: u32) {
     }
 }
 
-@compute @workgroup_size(256)
+@compute @workgroup_size(WORKGROUP_SIZE)
 fn project_backward_main(@builtin(workgroup_id) wid: vec3<u32>, @builtin(num_workgroups) nwg: vec3<u32>,
                          @builtin(local_invocation_index) lid: u32) {
-    let i = linear_index(wid, nwg, lid, 256u);
+    let i = linear_index(wid, nwg, lid, WORKGROUP_SIZE);
     if (i >= cam.n) {
         return;
     }

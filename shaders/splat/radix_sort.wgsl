@@ -14,22 +14,14 @@ struct SortUniforms {
     digit_mask: u32,
 }
 
-@group(0) @binding(0) var<uniform> u: SortUniforms;
-@group(0) @binding(1) var<storage, read> keys_in: array<u32>;
-@group(0) @binding(2) var<storage, read> values_in: array<u32>;
-@group(0) @binding(3) var<storage, read_write> keys_out: array<u32>;
-@group(0) @binding(4) var<storage, read_write> values_out: array<u32>;
-@group(0) @binding(5) var<storage, read_write> counts: array<u32>;
-@group(0) @binding(6) var<storage, read> offsets: array<u32>;
+// Bindings and injected constants: the `kernel!` declaration in
+// crates/splat/src/gpu/radix_sort.rs.
 
-const SORT_WG: u32 = 256u;
-const RADIX: u32 = 16u;
-
-var<workgroup> hist: array<atomic<u32>, 16>;
+var<workgroup> hist: array<atomic<u32>, RADIX>;
 // Per digit, a 256-bit mask of the block's elements holding it (8 words).
 var<workgroup> masks: array<atomic<u32>, 128>;
 
-@compute @workgroup_size(256)
+@compute @workgroup_size(WORKGROUP_SIZE)
 fn count(@builtin(workgroup_id) wid: vec3<u32>, @builtin(num_workgroups) nwg: vec3<u32>,
          @builtin(local_invocation_index) lid: u32) {
     let block = wid.y * nwg.x + wid.x;
@@ -37,7 +29,7 @@ fn count(@builtin(workgroup_id) wid: vec3<u32>, @builtin(num_workgroups) nwg: ve
         atomicStore(&hist[lid], 0u);
     }
     workgroupBarrier();
-    let i = block * SORT_WG + lid;
+    let i = block * WORKGROUP_SIZE + lid;
     if (i < u.n) {
         let d = (keys_in[i] >> u.shift) & u.digit_mask;
         atomicAdd(&hist[d], 1u);
@@ -48,11 +40,11 @@ fn count(@builtin(workgroup_id) wid: vec3<u32>, @builtin(num_workgroups) nwg: ve
     }
 }
 
-@compute @workgroup_size(256)
+@compute @workgroup_size(WORKGROUP_SIZE)
 fn scatter(@builtin(workgroup_id) wid: vec3<u32>, @builtin(num_workgroups) nwg: vec3<u32>,
            @builtin(local_invocation_index) lid: u32) {
     let block = wid.y * nwg.x + wid.x;
-    let i = block * SORT_WG + lid;
+    let i = block * WORKGROUP_SIZE + lid;
     var d = RADIX; // no digit for padding invocations
     var key = 0u;
     var value = 0u;

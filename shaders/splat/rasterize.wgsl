@@ -13,16 +13,10 @@
 // per-lane scratch memory). Each 8-column block walks only the splats that
 // can reach it (see the batch loop), which on a trained scene skips many.
 
-@group(0) @binding(0) var<uniform> cam: CameraUniforms;
-@group(0) @binding(1) var<storage, read> projected: array<ProjectedSplat>;
-@group(0) @binding(2) var<storage, read> tile_values: array<u32>;
-@group(0) @binding(3) var<storage, read> ranges: array<u32>;
-@group(0) @binding(4) var<storage, read_write> image: array<f32>;
-@group(0) @binding(5) var<storage, read_write> final_t: array<f32>;
-@group(0) @binding(6) var<storage, read_write> last_contrib: array<u32>;
+// Bindings and injected constants: the `kernel!` declaration in
+// crates/splat/src/gpu/rasterize.rs.
 
 const PPT: u32 = 16u;
-const THREADS: u32 = 16u; // 16 columns × (16 / PPT) rows
 // Column blocks of 8 × 16 pixels (one SIMD group on llvmpipe), each with its
 // own list of the batch's splats that can reach it.
 const BLOCK_COLS: u32 = 8u;
@@ -80,7 +74,7 @@ fn px_write(p: Px, x: u32, y: u32) {
     }
 }
 
-@compute @workgroup_size(16, 1)
+@compute @workgroup_size(THREADS, 1)
 fn rasterize_main(@builtin(workgroup_id) wid: vec3<u32>, @builtin(local_invocation_id) lid3: vec3<u32>,
                   @builtin(local_invocation_index) lid: u32) {
     let tile = wid.y * cam.grid_x + wid.x;

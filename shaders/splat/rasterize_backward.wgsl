@@ -19,17 +19,10 @@
 // one atomic per subgroup (see `kernel::GRAD_SUBGROUP_WGSL`).
 // Traversal starts at the largest `last_contrib` of the tile.
 
-@group(0) @binding(0) var<uniform> cam: CameraUniforms;
-@group(0) @binding(1) var<storage, read> projected: array<ProjectedSplat>;
-@group(0) @binding(2) var<storage, read> tile_values: array<u32>;
-@group(0) @binding(3) var<storage, read> ranges: array<u32>;
-@group(0) @binding(4) var<storage, read> final_t: array<f32>;
-@group(0) @binding(5) var<storage, read> last_contrib: array<u32>;
-@group(0) @binding(6) var<storage, read> v_image: array<f32>;
-@group(0) @binding(7) var<storage, read_write> grads: array<GradAtomic>;
+// Bindings and injected constants: the `kernel!` declaration in
+// crates/splat/src/gpu/rasterize_backward.rs.
 
 const PPT: u32 = 16u;
-const THREADS: u32 = 16u; // 16 columns × (16 / PPT) rows
 
 var<workgroup> s_id: array<u32, 256>;
 var<workgroup> s_mean_op: array<vec4<f32>, 256>;
@@ -121,7 +114,7 @@ fn px_step(p: ptr<function, Px>, acc: ptr<function, Acc>, k_rel: u32, mo: vec4<f
     (*acc).conic += v_power * vec3<f32>(-0.5 * dx * dx, -dx * dy, -0.5 * dy * dy);
 }
 
-@compute @workgroup_size(16, 1)
+@compute @workgroup_size(THREADS, 1)
 fn rasterize_backward_main(@builtin(workgroup_id) wid: vec3<u32>, @builtin(local_invocation_id) lid3: vec3<u32>,
                            @builtin(local_invocation_index) lid: u32) {
     let tile = wid.y * cam.grid_x + wid.x;

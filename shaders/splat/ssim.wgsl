@@ -29,25 +29,18 @@ struct SsimUniforms {
     taps: array<vec4<f32>, 3>,
 }
 
-@group(0) @binding(0) var<uniform> u: SsimUniforms;
-@group(0) @binding(1) var<storage, read> image: array<f32>;
-@group(0) @binding(2) var<storage, read> target_rgb: array<f32>;
-@group(0) @binding(3) var<storage, read> mask: array<f32>;
-@group(0) @binding(4) var<storage, read> src: array<f32>;
-@group(0) @binding(5) var<storage, read_write> dst: array<f32>;
-@group(0) @binding(6) var<storage, read_write> v_image: array<f32>;
-@group(0) @binding(7) var<storage, read_write> partials: array<f32>;
+// Bindings and injected constants: the `kernel!` declaration in
+// crates/splat/src/gpu/ssim.rs.
 
 const C1: f32 = 0.0001;
 const C2: f32 = 0.0009;
 
-var<workgroup> s_sum: array<f32, 256>;
+var<workgroup> s_sum: array<f32, WORKGROUP_SIZE>;
 
 // Register blocking: each invocation filters SEG consecutive outputs along
 // the filter direction from one window of SEG + 10 loads (instead of 11 loads
 // per output); storage reads are per-lane, bounds-checked gathers on
-// llvmpipe and dominate otherwise.
-const SEG: u32 = 8u;
+// llvmpipe and dominate otherwise. SEG is the host's `BLUR_SEGMENT`.
 
 fn at(base: u32, i: i32, lim: i32, stride: u32) -> f32 {
     if (i < 0 || i >= lim) {
@@ -78,11 +71,11 @@ fn filter_seg(base: u32, i0: u32, lim: u32, stride: u32) {
     }
 }
 
-@compute @workgroup_size(256)
+@compute @workgroup_size(WORKGROUP_SIZE)
 fn products(@builtin(workgroup_id) wid: vec3<u32>, @builtin(num_workgroups) nwg: vec3<u32>,
             @builtin(local_invocation_index) lid: u32) {
     let n = u.width * u.height;
-    let q = linear_index(wid, nwg, lid, 256u);
+    let q = linear_index(wid, nwg, lid, WORKGROUP_SIZE);
     if (q >= n) {
         return;
     }
@@ -98,13 +91,13 @@ fn products(@builtin(workgroup_id) wid: vec3<u32>, @builtin(num_workgroups) nwg:
 }
 
 // Horizontal: one invocation per (map, row, segment of SEG columns).
-@compute @workgroup_size(256)
+@compute @workgroup_size(WORKGROUP_SIZE)
 fn blur_h(@builtin(workgroup_id) wid: vec3<u32>, @builtin(num_workgroups) nwg: vec3<u32>,
           @builtin(local_invocation_index) lid: u32) {
     let n = u.width * u.height;
     let segs = (u.width + SEG - 1u) / SEG;
     let per_map = segs * u.height;
-    let i = linear_index(wid, nwg, lid, 256u);
+    let i = linear_index(wid, nwg, lid, WORKGROUP_SIZE);
     if (i >= per_map * u.n_maps) {
         return;
     }
@@ -116,13 +109,13 @@ fn blur_h(@builtin(workgroup_id) wid: vec3<u32>, @builtin(num_workgroups) nwg: v
 }
 
 // Vertical: one invocation per (map, segment of SEG rows, column).
-@compute @workgroup_size(256)
+@compute @workgroup_size(WORKGROUP_SIZE)
 fn blur_v(@builtin(workgroup_id) wid: vec3<u32>, @builtin(num_workgroups) nwg: vec3<u32>,
           @builtin(local_invocation_index) lid: u32) {
     let n = u.width * u.height;
     let segs = (u.height + SEG - 1u) / SEG;
     let per_map = segs * u.width;
-    let i = linear_index(wid, nwg, lid, 256u);
+    let i = linear_index(wid, nwg, lid, WORKGROUP_SIZE);
     if (i >= per_map * u.n_maps) {
         return;
     }
@@ -133,12 +126,12 @@ fn blur_v(@builtin(workgroup_id) wid: vec3<u32>, @builtin(num_workgroups) nwg: v
     filter_seg(k * n + col, seg * SEG, u.height, u.width);
 }
 
-@compute @workgroup_size(256)
+@compute @workgroup_size(WORKGROUP_SIZE)
 fn ssim_terms(@builtin(workgroup_id) wid: vec3<u32>, @builtin(num_workgroups) nwg: vec3<u32>,
               @builtin(local_invocation_index) lid: u32) {
     let n = u.width * u.height;
     let block = wid.y * nwg.x + wid.x;
-    let q = block * 256u + lid;
+    let q = block * WORKGROUP_SIZE + lid;
     var total = 0.0;
     if (q < n) {
         var m = 1.0;
@@ -188,11 +181,11 @@ fn ssim_terms(@builtin(workgroup_id) wid: vec3<u32>, @builtin(num_workgroups) nw
     }
 }
 
-@compute @workgroup_size(256)
+@compute @workgroup_size(WORKGROUP_SIZE)
 fn ssim_grad(@builtin(workgroup_id) wid: vec3<u32>, @builtin(num_workgroups) nwg: vec3<u32>,
              @builtin(local_invocation_index) lid: u32) {
     let n = u.width * u.height;
-    let q = linear_index(wid, nwg, lid, 256u);
+    let q = linear_index(wid, nwg, lid, WORKGROUP_SIZE);
     if (q >= n) {
         return;
     }

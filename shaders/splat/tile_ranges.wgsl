@@ -9,14 +9,13 @@ struct RangeUniforms {
     pad1: u32,
 }
 
-@group(0) @binding(0) var<uniform> u: RangeUniforms;
-@group(0) @binding(1) var<storage, read> tile_keys: array<u32>;
-@group(0) @binding(2) var<storage, read_write> ranges: array<u32>;
+// Bindings and injected constants: the `kernel!` declaration in
+// crates/splat/src/gpu/tile_ranges.rs.
 
-@compute @workgroup_size(256)
+@compute @workgroup_size(WORKGROUP_SIZE)
 fn ranges_main(@builtin(workgroup_id) wid: vec3<u32>, @builtin(num_workgroups) nwg: vec3<u32>,
                @builtin(local_invocation_index) lid: u32) {
-    let i = linear_index(wid, nwg, lid, 256u);
+    let i = linear_index(wid, nwg, lid, WORKGROUP_SIZE);
     if (i >= u.n) {
         return;
     }

@@ -2,7 +2,7 @@
 //! parameter group, matching `train::adam::adam_step` (torch.optim.Adam,
 //! INRIA ε = 1e-15) so the parameters and moments never leave the device.
 
-use super::kernel::{BindingDecl, BindingKind, Kernel, KernelDecl, Recorder, groups_1d};
+use super::kernel::{Recorder, groups_1d, kernel};
 use super::{GpuContext, GpuError};
 use bytemuck::{Pod, Zeroable};
 
@@ -55,45 +55,21 @@ impl AdamUniforms {
     }
 }
 
-pub static DECL: KernelDecl = KernelDecl {
-    name: "adam",
-    source: include_str!("../../../../shaders/splat/adam.wgsl"),
-    entry_points: &["adam_main"],
-    bindings: &[
-        BindingDecl {
-            name: "u",
-            binding: 0,
-            kind: BindingKind::Uniform,
-        },
-        BindingDecl {
-            name: "params",
-            binding: 1,
-            kind: BindingKind::StorageRw,
-        },
-        BindingDecl {
-            name: "grads",
-            binding: 2,
-            kind: BindingKind::StorageRead,
-        },
-        BindingDecl {
-            name: "exp_avg",
-            binding: 3,
-            kind: BindingKind::StorageRw,
-        },
-        BindingDecl {
-            name: "exp_avg_sq",
-            binding: 4,
-            kind: BindingKind::StorageRw,
-        },
-        BindingDecl {
-            name: "projected",
-            binding: 5,
-            kind: BindingKind::StorageRead,
-        },
-    ],
-    uniform: Some(("AdamUniforms", std::mem::size_of::<AdamUniforms>())),
-    uses_grad_atomics: false,
-};
+kernel! {
+    /// The compiled kernel.
+    pub struct Adam;
+    decl DECL = "adam";
+    bindings AdamBindings {
+        u: uniform AdamUniforms,
+        params: read_write "array<f32>",
+        grads: read "array<f32>",
+        exp_avg: read_write "array<f32>",
+        exp_avg_sq: read_write "array<f32>",
+        projected: read "array<ProjectedSplat>",
+    }
+    entry_points { adam_main: [WORKGROUP_SIZE] }
+    constants { WORKGROUP_SIZE }
+}
 
 /// One group's buffers.
 pub struct AdamArgs<'a> {
@@ -107,18 +83,7 @@ pub struct AdamArgs<'a> {
     pub uniforms: AdamUniforms,
 }
 
-/// The compiled kernel.
-pub struct Adam {
-    kernel: Kernel,
-}
-
 impl Adam {
-    pub fn new(ctx: &GpuContext) -> Self {
-        Adam {
-            kernel: Kernel::new(ctx, &DECL),
-        }
-    }
-
     pub fn dispatch(
         &self,
         ctx: &GpuContext,
@@ -129,16 +94,16 @@ impl Adam {
             return Ok(());
         }
         let u = ctx.uniform("adam_u", &a.uniforms);
-        let bind = self.kernel.bind(
+        let bind = self.bind(
             ctx,
-            &[
-                ("u", &u),
-                ("params", a.params),
-                ("grads", a.grads),
-                ("exp_avg", a.exp_avg),
-                ("exp_avg_sq", a.exp_avg_sq),
-                ("projected", a.visible),
-            ],
+            &AdamBindings {
+                u: &u,
+                params: a.params,
+                grads: a.grads,
+                exp_avg: a.exp_avg,
+                exp_avg_sq: a.exp_avg_sq,
+                projected: a.visible,
+            },
         )?;
         rec.dispatch(
             &self.kernel,

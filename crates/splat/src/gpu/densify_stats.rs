@@ -2,57 +2,29 @@
 //! statistics kept on the GPU (INRIA `add_densification_stats`; the same
 //! update as `reference::backend::CpuBackend::step`) and the visible count.
 
-use super::kernel::{BindingDecl, BindingKind, Kernel, KernelDecl, Recorder, groups_1d};
+use super::kernel::{Recorder, groups_1d, kernel};
 use super::project::CameraUniforms;
 use super::{GpuContext, GpuError};
 
 /// Invocations per workgroup.
 pub const WORKGROUP_SIZE: u32 = 256;
 
-pub static DECL: KernelDecl = KernelDecl {
-    name: "densify_stats",
-    source: include_str!("../../../../shaders/splat/densify_stats.wgsl"),
-    entry_points: &["densify_stats_main"],
-    bindings: &[
-        BindingDecl {
-            name: "cam",
-            binding: 0,
-            kind: BindingKind::Uniform,
-        },
-        BindingDecl {
-            name: "projected",
-            binding: 1,
-            kind: BindingKind::StorageRead,
-        },
-        BindingDecl {
-            name: "v_proj",
-            binding: 2,
-            kind: BindingKind::StorageRead,
-        },
-        BindingDecl {
-            name: "grad_accum",
-            binding: 3,
-            kind: BindingKind::StorageRw,
-        },
-        BindingDecl {
-            name: "vis_count",
-            binding: 4,
-            kind: BindingKind::StorageRw,
-        },
-        BindingDecl {
-            name: "max_radius",
-            binding: 5,
-            kind: BindingKind::StorageRw,
-        },
-        BindingDecl {
-            name: "visible",
-            binding: 6,
-            kind: BindingKind::StorageRw,
-        },
-    ],
-    uniform: Some(("CameraUniforms", std::mem::size_of::<CameraUniforms>())),
-    uses_grad_atomics: false,
-};
+kernel! {
+    /// The compiled kernel.
+    pub struct DensifyStatsKernel;
+    decl DECL = "densify_stats";
+    bindings StatsBindings {
+        cam: uniform CameraUniforms,
+        projected: read "array<ProjectedSplat>",
+        v_proj: read "array<f32>",
+        grad_accum: read_write "array<f32>",
+        vis_count: read_write "array<u32>",
+        max_radius: read_write "array<f32>",
+        visible: read_write "atomic<u32>",
+    }
+    entry_points { densify_stats_main: [WORKGROUP_SIZE] }
+    constants { WORKGROUP_SIZE }
+}
 
 /// Statistics buffers resident on the GPU.
 pub struct StatsBuffers {
@@ -85,18 +57,7 @@ pub struct StatsArgs<'a> {
     pub n: u32,
 }
 
-/// The compiled kernel.
-pub struct DensifyStatsKernel {
-    kernel: Kernel,
-}
-
 impl DensifyStatsKernel {
-    pub fn new(ctx: &GpuContext) -> Self {
-        DensifyStatsKernel {
-            kernel: Kernel::new(ctx, &DECL),
-        }
-    }
-
     pub fn dispatch(
         &self,
         ctx: &GpuContext,
@@ -107,17 +68,17 @@ impl DensifyStatsKernel {
         if a.n == 0 {
             return Ok(());
         }
-        let bind = self.kernel.bind(
+        let bind = self.bind(
             ctx,
-            &[
-                ("cam", a.cam),
-                ("projected", a.projected),
-                ("v_proj", a.v_proj),
-                ("grad_accum", &a.stats.grad_accum),
-                ("vis_count", &a.stats.count),
-                ("max_radius", &a.stats.max_radius),
-                ("visible", &a.stats.visible),
-            ],
+            &StatsBindings {
+                cam: a.cam,
+                projected: a.projected,
+                v_proj: a.v_proj,
+                grad_accum: &a.stats.grad_accum,
+                vis_count: &a.stats.count,
+                max_radius: &a.stats.max_radius,
+                visible: &a.stats.visible,
+            },
         )?;
         rec.dispatch(
             &self.kernel,

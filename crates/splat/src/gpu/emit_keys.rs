@@ -4,7 +4,7 @@
 //! comes from `tile_rect` in `common.wgsl`, shared by counting and emission.
 //! Reference: Kerbl et al., "3D Gaussian Splatting" (2023), §6 (tile binning).
 
-use super::kernel::{BindingDecl, BindingKind, Kernel, KernelDecl, Recorder, groups_1d};
+use super::kernel::{Recorder, groups_1d, kernel};
 use super::{GpuContext, GpuError};
 use bytemuck::{Pod, Zeroable};
 
@@ -22,55 +22,27 @@ pub struct BinUniforms {
     pub pad: u32,
 }
 
-pub static DECL: KernelDecl = KernelDecl {
-    name: "emit_keys",
-    source: include_str!("../../../../shaders/splat/emit_keys.wgsl"),
-    entry_points: &["depth_keys", "gather_counts", "emit"],
-    bindings: &[
-        BindingDecl {
-            name: "u",
-            binding: 0,
-            kind: BindingKind::Uniform,
-        },
-        BindingDecl {
-            name: "projected",
-            binding: 1,
-            kind: BindingKind::StorageRead,
-        },
-        BindingDecl {
-            name: "depth_keys_out",
-            binding: 2,
-            kind: BindingKind::StorageRw,
-        },
-        BindingDecl {
-            name: "order",
-            binding: 3,
-            kind: BindingKind::StorageRw,
-        },
-        BindingDecl {
-            name: "counts",
-            binding: 4,
-            kind: BindingKind::StorageRw,
-        },
-        BindingDecl {
-            name: "offsets",
-            binding: 5,
-            kind: BindingKind::StorageRead,
-        },
-        BindingDecl {
-            name: "tile_keys",
-            binding: 6,
-            kind: BindingKind::StorageRw,
-        },
-        BindingDecl {
-            name: "tile_values",
-            binding: 7,
-            kind: BindingKind::StorageRw,
-        },
-    ],
-    uniform: Some(("BinUniforms", std::mem::size_of::<BinUniforms>())),
-    uses_grad_atomics: false,
-};
+kernel! {
+    /// The compiled binning kernel.
+    pub struct EmitKeys;
+    decl DECL = "emit_keys";
+    bindings EmitBindings {
+        u: uniform BinUniforms,
+        projected: read "array<ProjectedSplat>",
+        depth_keys_out: read_write "array<u32>",
+        order: read_write "array<u32>",
+        counts: read_write "array<u32>",
+        offsets: read "array<u32>",
+        tile_keys: read_write "array<u32>",
+        tile_values: read_write "array<u32>",
+    }
+    entry_points {
+        depth_keys: [WORKGROUP_SIZE],
+        gather_counts: [WORKGROUP_SIZE],
+        emit: [WORKGROUP_SIZE],
+    }
+    constants { WORKGROUP_SIZE }
+}
 
 /// Buffers of one binning step (bound by name).
 pub struct EmitArgs<'a> {
@@ -86,34 +58,7 @@ pub struct EmitArgs<'a> {
     pub n: u32,
 }
 
-/// The compiled binning kernel.
-pub struct EmitKeys {
-    kernel: Kernel,
-}
-
 impl EmitKeys {
-    pub fn new(ctx: &GpuContext) -> Self {
-        EmitKeys {
-            kernel: Kernel::new(ctx, &DECL),
-        }
-    }
-
-    fn bind(&self, ctx: &GpuContext, a: &EmitArgs) -> Result<wgpu::BindGroup, GpuError> {
-        self.kernel.bind(
-            ctx,
-            &[
-                ("u", a.uniforms),
-                ("projected", a.projected),
-                ("depth_keys_out", a.depth_keys),
-                ("order", a.order),
-                ("counts", a.counts),
-                ("offsets", a.offsets),
-                ("tile_keys", a.tile_keys),
-                ("tile_values", a.tile_values),
-            ],
-        )
-    }
-
     /// Record `entry` ("depth_keys", "gather_counts" or "emit") over all splats.
     pub fn dispatch(
         &self,
@@ -122,7 +67,19 @@ impl EmitKeys {
         entry: &'static str,
         args: &EmitArgs,
     ) -> Result<(), GpuError> {
-        let bind = self.bind(ctx, args)?;
+        let bind = self.bind(
+            ctx,
+            &EmitBindings {
+                u: args.uniforms,
+                projected: args.projected,
+                depth_keys_out: args.depth_keys,
+                order: args.order,
+                counts: args.counts,
+                offsets: args.offsets,
+                tile_keys: args.tile_keys,
+                tile_values: args.tile_values,
+            },
+        )?;
         rec.dispatch(
             &self.kernel,
             entry,

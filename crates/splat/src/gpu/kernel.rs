@@ -1,12 +1,18 @@
-//! Shared plumbing for every compute kernel: the binding table each host
-//! module declares, the pipeline built once from it, binding buffers *by name*
-//! (never by position), and a command recorder that can time every dispatch
-//! with timestamp queries (used by `gpu::profile_step`).
+//! Shared plumbing for every compute kernel: the [`kernel!`] declaration each
+//! host module makes, the pipeline built once from it, the bind group built
+//! from a typed struct of buffers, and a command recorder that can time every
+//! dispatch with timestamp queries (used by `gpu::profile_step`).
 //!
-//! The binding table is the single truth on the Rust side; the explicit bind
-//! group layout is built from it, wgpu validates the WGSL against that layout
-//! when the pipeline is created, and `tests/reflection` checks the table
-//! against naga's reflection of every shader (names, read-only, uniform sizes).
+//! A kernel is declared once, in its host module, with [`kernel!`]: the WGSL
+//! file, its bindings (name, access, WGSL type), its entry points with their
+//! workgroup sizes, and the Rust constants injected into the WGSL. From that
+//! one declaration come the [`KernelDecl`] table, the `@group(0) @binding(n)`
+//! lines prepended to the shader (the `.wgsl` files declare no bindings), a
+//! bindings struct with one field per binding (so buffers are bound by name,
+//! checked by the compiler), and the host type with `new` / `bind`. The
+//! reflection test (`tests/reflection`) parses every assembled shader with
+//! naga and checks it against the table: uniform struct name and byte size,
+//! entry points, and each entry point's `@workgroup_size`.
 
 use super::{GpuContext, GpuError};
 
@@ -21,31 +27,146 @@ pub enum BindingKind {
     StorageRw,
 }
 
-/// One `@group(0) @binding(n) var name` of a kernel.
+/// One `@group(0) @binding(n) var` of a kernel; `n` is its index in
+/// [`KernelDecl::bindings`].
 #[derive(Debug, Clone, Copy)]
 pub struct BindingDecl {
     pub name: &'static str,
-    pub binding: u32,
     pub kind: BindingKind,
+    /// WGSL type: the uniform struct's name, or the storage type
+    /// (`array<f32>`, `atomic<u32>`, …).
+    pub ty: &'static str,
 }
 
-/// Everything the host knows about one WGSL file.
+/// One compute entry point and its workgroup size.
+#[derive(Debug, Clone, Copy)]
+pub struct EntryPoint {
+    pub name: &'static str,
+    pub workgroup_size: [u32; 3],
+}
+
+/// Everything the host knows about one WGSL file (made by [`kernel!`]).
 #[derive(Debug, Clone, Copy)]
 pub struct KernelDecl {
     /// File stem in `shaders/splat/` and the host module name.
     pub name: &'static str,
-    /// The WGSL text of the kernel (without `common.wgsl`).
+    /// The WGSL text of the kernel (without `common.wgsl`, the injected
+    /// constants and the bindings).
     pub source: &'static str,
     /// Compute entry points.
-    pub entry_points: &'static [&'static str],
-    /// Every binding in group 0.
+    pub entry_points: &'static [EntryPoint],
+    /// `const NAME: u32 = value;` lines injected into the WGSL.
+    pub constants: &'static [(&'static str, u32)],
+    /// Every binding in group 0; binding 0 is the uniform.
     pub bindings: &'static [BindingDecl],
-    /// Name and byte size of the uniform struct, when there is one.
-    pub uniform: Option<(&'static str, usize)>,
+    /// Byte size of the Rust uniform struct (`bindings[0].ty` names it).
+    pub uniform_size: usize,
     /// True when the kernel uses gradient atomics (`grad_add`), so it is
     /// compiled in a float-atomic and a CAS variant.
     pub uses_grad_atomics: bool,
 }
+
+/// Declares one kernel: its [`KernelDecl`] static, a bindings struct and the
+/// host type (`new`, `bind`). The host module adds its own `dispatch`.
+///
+/// ```ignore
+/// kernel! {
+///     /// The compiled kernel.
+///     pub struct Adam;
+///     decl DECL = "adam";                      // shaders/splat/adam.wgsl
+///     bindings AdamBindings {
+///         u: uniform AdamUniforms,             // binding 0, the Rust #[repr(C)] struct
+///         params: read_write "array<f32>",     // binding 1, …
+///         grads: read "array<f32>",
+///     }
+///     entry_points { adam_main: [WORKGROUP_SIZE] }
+///     constants { WORKGROUP_SIZE }             // Rust consts, injected as WGSL consts
+/// }
+/// ```
+/// `decl X = "name" after ["other"]` prepends `shaders/splat/other.wgsl`;
+/// `constants { NAME = expr }` injects a value under another name;
+/// `grad_atomics` marks a kernel that calls `grad_add` (see [`shader_source`]).
+macro_rules! kernel {
+    (
+        $(#[$doc:meta])*
+        pub struct $host:ident;
+        decl $decl:ident = $name:literal $(after [$($pre:literal),+])?;
+        bindings $bindings:ident {
+            $uname:ident: uniform $uty:ident,
+            $($sname:ident: $access:ident $sty:literal),+ $(,)?
+        }
+        entry_points { $($ep:ident: [$($wg:expr),+]),+ $(,)? }
+        constants { $($cname:ident $(= $cval:expr)?),* $(,)? }
+        $($atomics:ident)?
+    ) => {
+        pub static $decl: $crate::gpu::kernel::KernelDecl = $crate::gpu::kernel::KernelDecl {
+            name: $name,
+            source: concat!(
+                $($(include_str!(concat!("../../../../shaders/splat/", $pre, ".wgsl")),)+)?
+                include_str!(concat!("../../../../shaders/splat/", $name, ".wgsl"))
+            ),
+            entry_points: &[$($crate::gpu::kernel::EntryPoint {
+                name: stringify!($ep),
+                workgroup_size: $crate::gpu::kernel::kernel!(@wg $($wg),+),
+            }),+],
+            constants: &[$((stringify!($cname), $crate::gpu::kernel::kernel!(@value $cname $($cval)?))),*],
+            bindings: &[
+                $crate::gpu::kernel::BindingDecl {
+                    name: stringify!($uname),
+                    kind: $crate::gpu::kernel::BindingKind::Uniform,
+                    ty: stringify!($uty),
+                },
+                $($crate::gpu::kernel::BindingDecl {
+                    name: stringify!($sname),
+                    kind: $crate::gpu::kernel::kernel!(@kind $access),
+                    ty: $sty,
+                }),+
+            ],
+            uniform_size: std::mem::size_of::<$uty>(),
+            uses_grad_atomics: $crate::gpu::kernel::kernel!(@atomics $($atomics)?),
+        };
+
+        /// The buffers of one bind group, one field per binding of the
+        /// kernel (generated by `kernel!`).
+        pub struct $bindings<'a> {
+            pub $uname: &'a wgpu::Buffer,
+            $(pub $sname: &'a wgpu::Buffer,)+
+        }
+
+        $(#[$doc])*
+        pub struct $host {
+            kernel: $crate::gpu::kernel::Kernel,
+        }
+
+        impl $host {
+            /// Build the pipelines (pays the shader compile once).
+            pub fn new(ctx: &$crate::gpu::GpuContext) -> Self {
+                $host {
+                    kernel: $crate::gpu::kernel::Kernel::new(ctx, &$decl),
+                }
+            }
+
+            /// A bind group holding `b`.
+            pub fn bind(
+                &self,
+                ctx: &$crate::gpu::GpuContext,
+                b: &$bindings,
+            ) -> Result<wgpu::BindGroup, $crate::gpu::GpuError> {
+                self.kernel.bind(ctx, &[b.$uname, $(b.$sname),+])
+            }
+        }
+    };
+    (@wg $x:expr) => { [$x, 1, 1] };
+    (@wg $x:expr, $y:expr) => { [$x, $y, 1] };
+    (@wg $x:expr, $y:expr, $z:expr) => { [$x, $y, $z] };
+    (@value $cname:ident) => { $cname };
+    (@value $cname:ident $cval:expr) => { $cval };
+    (@kind read) => { $crate::gpu::kernel::BindingKind::StorageRead };
+    (@kind read_write) => { $crate::gpu::kernel::BindingKind::StorageRw };
+    (@atomics) => { false };
+    (@atomics grad_atomics) => { true };
+}
+pub(crate) use kernel;
 
 /// Shared helpers (structs, tile rectangles, projection math) prepended to every kernel.
 pub const COMMON_WGSL: &str = include_str!("../../../../shaders/splat/common.wgsl");
@@ -120,6 +241,20 @@ pub fn shader_source_cols(
         });
         s.push('\n');
     }
+    for (name, value) in decl.constants {
+        s.push_str(&format!("const {name}: u32 = {value}u;\n"));
+    }
+    for (i, b) in decl.bindings.iter().enumerate() {
+        let space = match b.kind {
+            BindingKind::Uniform => "uniform",
+            BindingKind::StorageRead => "storage, read",
+            BindingKind::StorageRw => "storage, read_write",
+        };
+        s.push_str(&format!(
+            "@group(0) @binding({i}) var<{space}> {}: {};\n",
+            b.name, b.ty
+        ));
+    }
     s.push_str(decl.source);
     s
 }
@@ -137,8 +272,9 @@ impl Kernel {
         let entries: Vec<wgpu::BindGroupLayoutEntry> = decl
             .bindings
             .iter()
-            .map(|b| wgpu::BindGroupLayoutEntry {
-                binding: b.binding,
+            .zip(0u32..)
+            .map(|(b, binding)| wgpu::BindGroupLayoutEntry {
+                binding,
                 visibility: wgpu::ShaderStages::COMPUTE,
                 ty: wgpu::BindingType::Buffer {
                     ty: match b.kind {
@@ -182,6 +318,7 @@ impl Kernel {
             .entry_points
             .iter()
             .map(|ep| {
+                let ep = ep.name;
                 let p = ctx
                     .device
                     .create_compute_pipeline(&wgpu::ComputePipelineDescriptor {
@@ -192,7 +329,7 @@ impl Kernel {
                         compilation_options: Default::default(),
                         cache: None,
                     });
-                (*ep, p)
+                (ep, p)
             })
             .collect();
         Kernel {
@@ -202,38 +339,29 @@ impl Kernel {
         }
     }
 
-    /// A bind group from `(name, buffer)` pairs; every declared binding must be
-    /// given exactly once and no unknown name may appear.
+    /// A bind group from one buffer per declared binding, in binding order
+    /// (the bindings struct that [`kernel!`] generates calls this).
     pub fn bind(
         &self,
         ctx: &GpuContext,
-        buffers: &[(&str, &wgpu::Buffer)],
+        buffers: &[&wgpu::Buffer],
     ) -> Result<wgpu::BindGroup, GpuError> {
-        for (name, _) in buffers {
-            if !self.decl.bindings.iter().any(|b| b.name == *name) {
-                return Err(GpuError::Binding(format!(
-                    "{}: no binding named {name}",
-                    self.decl.name
-                )));
-            }
+        if buffers.len() != self.decl.bindings.len() {
+            return Err(GpuError::Binding(format!(
+                "{}: {} buffers for {} bindings",
+                self.decl.name,
+                buffers.len(),
+                self.decl.bindings.len()
+            )));
         }
-        let mut entries = Vec::with_capacity(self.decl.bindings.len());
-        for b in self.decl.bindings {
-            let mut found = buffers.iter().filter(|(n, _)| *n == b.name);
-            let buf = found.next().ok_or_else(|| {
-                GpuError::Binding(format!("{}: binding {} not given", self.decl.name, b.name))
-            })?;
-            if found.next().is_some() {
-                return Err(GpuError::Binding(format!(
-                    "{}: binding {} given twice",
-                    self.decl.name, b.name
-                )));
-            }
-            entries.push(wgpu::BindGroupEntry {
-                binding: b.binding,
-                resource: buf.1.as_entire_binding(),
-            });
-        }
+        let entries: Vec<wgpu::BindGroupEntry> = buffers
+            .iter()
+            .zip(0u32..)
+            .map(|(buf, binding)| wgpu::BindGroupEntry {
+                binding,
+                resource: buf.as_entire_binding(),
+            })
+            .collect();
         Ok(ctx.device.create_bind_group(&wgpu::BindGroupDescriptor {
             label: Some(self.decl.name),
             layout: &self.layout,

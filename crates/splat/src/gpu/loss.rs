@@ -3,7 +3,7 @@
 //! term (weight > 0) is computed on the CPU from a readback by the backend
 //! (`train::loss::loss_and_grad`), not here.
 
-use super::kernel::{BindingDecl, BindingKind, Kernel, KernelDecl, Recorder, groups_1d};
+use super::kernel::{Recorder, groups_1d, kernel};
 use super::{GpuContext, GpuError};
 use bytemuck::{Pod, Zeroable};
 
@@ -22,45 +22,21 @@ pub struct LossUniforms {
     pub pad2: [f32; 3],
 }
 
-pub static DECL: KernelDecl = KernelDecl {
-    name: "loss",
-    source: include_str!("../../../../shaders/splat/loss.wgsl"),
-    entry_points: &["l1_grad"],
-    bindings: &[
-        BindingDecl {
-            name: "u",
-            binding: 0,
-            kind: BindingKind::Uniform,
-        },
-        BindingDecl {
-            name: "image",
-            binding: 1,
-            kind: BindingKind::StorageRead,
-        },
-        BindingDecl {
-            name: "target_rgb",
-            binding: 2,
-            kind: BindingKind::StorageRead,
-        },
-        BindingDecl {
-            name: "mask",
-            binding: 3,
-            kind: BindingKind::StorageRead,
-        },
-        BindingDecl {
-            name: "v_image",
-            binding: 4,
-            kind: BindingKind::StorageRw,
-        },
-        BindingDecl {
-            name: "partials",
-            binding: 5,
-            kind: BindingKind::StorageRw,
-        },
-    ],
-    uniform: Some(("LossUniforms", std::mem::size_of::<LossUniforms>())),
-    uses_grad_atomics: false,
-};
+kernel! {
+    /// The compiled kernel.
+    pub struct Loss;
+    decl DECL = "loss";
+    bindings LossBindings {
+        u: uniform LossUniforms,
+        image: read "array<f32>",
+        target_rgb: read "array<f32>",
+        mask: read "array<f32>",
+        v_image: read_write "array<f32>",
+        partials: read_write "array<f32>",
+    }
+    entry_points { l1_grad: [WORKGROUP_SIZE] }
+    constants { WORKGROUP_SIZE }
+}
 
 /// Buffers of one loss evaluation.
 pub struct LossArgs<'a> {
@@ -79,18 +55,7 @@ pub fn blocks(pixels: u32) -> u32 {
     pixels.div_ceil(WORKGROUP_SIZE).max(1)
 }
 
-/// The compiled kernel.
-pub struct Loss {
-    kernel: Kernel,
-}
-
 impl Loss {
-    pub fn new(ctx: &GpuContext) -> Self {
-        Loss {
-            kernel: Kernel::new(ctx, &DECL),
-        }
-    }
-
     pub fn dispatch(
         &self,
         ctx: &GpuContext,
@@ -98,16 +63,16 @@ impl Loss {
         a: &LossArgs,
     ) -> Result<(), GpuError> {
         let u = ctx.uniform("loss_u", &a.uniforms);
-        let bind = self.kernel.bind(
+        let bind = self.bind(
             ctx,
-            &[
-                ("u", &u),
-                ("image", a.image),
-                ("target_rgb", a.target),
-                ("mask", a.mask),
-                ("v_image", a.v_image),
-                ("partials", a.partials),
-            ],
+            &LossBindings {
+                u: &u,
+                image: a.image,
+                target_rgb: a.target,
+                mask: a.mask,
+                v_image: a.v_image,
+                partials: a.partials,
+            },
         )?;
         rec.dispatch(
             &self.kernel,

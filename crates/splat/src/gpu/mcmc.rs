@@ -5,7 +5,7 @@
 //! regulariser gradients before it. Both mirror `reference::mcmc` (same PCG
 //! hash, same operation order); `tests` checks GPU against CPU.
 
-use super::kernel::{BindingDecl, BindingKind, Kernel, KernelDecl, Recorder, groups_1d};
+use super::kernel::{Recorder, groups_1d, kernel};
 use super::project::ParamBuffers;
 use super::project_backward::GradBuffers;
 use super::{GpuContext, GpuError};
@@ -45,58 +45,47 @@ pub struct McmcRegUniforms {
     pub pad4: f32,
 }
 
-const fn b(name: &'static str, binding: u32, kind: BindingKind) -> BindingDecl {
-    BindingDecl {
-        name,
-        binding,
-        kind,
+kernel! {
+    /// The compiled position-noise kernel.
+    pub struct McmcNoise;
+    decl NOISE_DECL = "mcmc_noise";
+    bindings NoiseBindings {
+        u: uniform McmcNoiseUniforms,
+        means: read_write "array<f32>",
+        log_scales: read "array<f32>",
+        rotations: read "array<f32>",
+        opacity_logits: read "array<f32>",
     }
+    entry_points { mcmc_noise_main: [WORKGROUP_SIZE] }
+    constants { WORKGROUP_SIZE }
 }
 
-pub static NOISE_DECL: KernelDecl = KernelDecl {
-    name: "mcmc_noise",
-    source: include_str!("../../../../shaders/splat/mcmc_noise.wgsl"),
-    entry_points: &["mcmc_noise_main"],
-    bindings: &[
-        b("u", 0, BindingKind::Uniform),
-        b("means", 1, BindingKind::StorageRw),
-        b("log_scales", 2, BindingKind::StorageRead),
-        b("rotations", 3, BindingKind::StorageRead),
-        b("opacity_logits", 4, BindingKind::StorageRead),
-    ],
-    uniform: Some((
-        "McmcNoiseUniforms",
-        std::mem::size_of::<McmcNoiseUniforms>(),
-    )),
-    uses_grad_atomics: false,
-};
-
-pub static REG_DECL: KernelDecl = KernelDecl {
-    name: "mcmc_reg",
-    source: include_str!("../../../../shaders/splat/mcmc_reg.wgsl"),
-    entry_points: &["mcmc_reg_main"],
-    bindings: &[
-        b("u", 0, BindingKind::Uniform),
-        b("log_scales", 1, BindingKind::StorageRead),
-        b("opacity_logits", 2, BindingKind::StorageRead),
-        b("grad_log_scales", 3, BindingKind::StorageRw),
-        b("grad_opacity_logits", 4, BindingKind::StorageRw),
-    ],
-    uniform: Some(("McmcRegUniforms", std::mem::size_of::<McmcRegUniforms>())),
-    uses_grad_atomics: false,
-};
+kernel! {
+    /// The compiled regulariser kernel.
+    pub struct McmcReg;
+    decl REG_DECL = "mcmc_reg";
+    bindings RegBindings {
+        u: uniform McmcRegUniforms,
+        log_scales: read "array<f32>",
+        opacity_logits: read "array<f32>",
+        grad_log_scales: read_write "array<f32>",
+        grad_opacity_logits: read_write "array<f32>",
+    }
+    entry_points { mcmc_reg_main: [WORKGROUP_SIZE] }
+    constants { WORKGROUP_SIZE }
+}
 
 /// Both compiled kernels.
 pub struct McmcKernels {
-    noise: Kernel,
-    reg: Kernel,
+    noise: McmcNoise,
+    reg: McmcReg,
 }
 
 impl McmcKernels {
     pub fn new(ctx: &GpuContext) -> Self {
         McmcKernels {
-            noise: Kernel::new(ctx, &NOISE_DECL),
-            reg: Kernel::new(ctx, &REG_DECL),
+            noise: McmcNoise::new(ctx),
+            reg: McmcReg::new(ctx),
         }
     }
 
@@ -126,16 +115,16 @@ impl McmcKernels {
         );
         let bind = self.noise.bind(
             ctx,
-            &[
-                ("u", &u),
-                ("means", &params.means),
-                ("log_scales", &params.log_scales),
-                ("rotations", &params.rotations),
-                ("opacity_logits", &params.opacity_logits),
-            ],
+            &NoiseBindings {
+                u: &u,
+                means: &params.means,
+                log_scales: &params.log_scales,
+                rotations: &params.rotations,
+                opacity_logits: &params.opacity_logits,
+            },
         )?;
         rec.dispatch(
-            &self.noise,
+            &self.noise.kernel,
             "mcmc_noise_main",
             &bind,
             groups_1d(params.n, WORKGROUP_SIZE),
@@ -172,16 +161,16 @@ impl McmcKernels {
         );
         let bind = self.reg.bind(
             ctx,
-            &[
-                ("u", &u),
-                ("log_scales", &params.log_scales),
-                ("opacity_logits", &params.opacity_logits),
-                ("grad_log_scales", &grads.log_scales),
-                ("grad_opacity_logits", &grads.opacity_logits),
-            ],
+            &RegBindings {
+                u: &u,
+                log_scales: &params.log_scales,
+                opacity_logits: &params.opacity_logits,
+                grad_log_scales: &grads.log_scales,
+                grad_opacity_logits: &grads.opacity_logits,
+            },
         )?;
         rec.dispatch(
-            &self.reg,
+            &self.reg.kernel,
             "mcmc_reg_main",
             &bind,
             groups_1d(params.n, WORKGROUP_SIZE),

@@ -4,7 +4,7 @@
 //! Reference: Blelloch, "Prefix sums and their applications" (1990); the
 //! per-block scan is Hillis–Steele.
 
-use super::kernel::{BindingDecl, BindingKind, Kernel, KernelDecl, Recorder, groups_1d};
+use super::kernel::{Recorder, groups_1d, kernel};
 use super::{GpuContext, GpuError};
 use bytemuck::{Pod, Zeroable};
 
@@ -19,35 +19,23 @@ pub struct ScanUniforms {
     pub pad: [u32; 3],
 }
 
-pub static DECL: KernelDecl = KernelDecl {
-    name: "prefix_sum",
-    source: include_str!("../../../../shaders/splat/prefix_sum.wgsl"),
-    entry_points: &["scan_blocks", "add_block_offsets", "write_total"],
-    bindings: &[
-        BindingDecl {
-            name: "u",
-            binding: 0,
-            kind: BindingKind::Uniform,
-        },
-        BindingDecl {
-            name: "input",
-            binding: 1,
-            kind: BindingKind::StorageRead,
-        },
-        BindingDecl {
-            name: "output",
-            binding: 2,
-            kind: BindingKind::StorageRw,
-        },
-        BindingDecl {
-            name: "block_sums",
-            binding: 3,
-            kind: BindingKind::StorageRw,
-        },
-    ],
-    uniform: Some(("ScanUniforms", std::mem::size_of::<ScanUniforms>())),
-    uses_grad_atomics: false,
-};
+kernel! {
+    /// The compiled scan kernel.
+    pub struct PrefixSum;
+    decl DECL = "prefix_sum";
+    bindings ScanBindings {
+        u: uniform ScanUniforms,
+        input: read "array<u32>",
+        output: read_write "array<u32>",
+        block_sums: read_write "array<u32>",
+    }
+    entry_points {
+        scan_blocks: [WORKGROUP_SIZE],
+        add_block_offsets: [WORKGROUP_SIZE],
+        write_total: [1],
+    }
+    constants { WORKGROUP_SIZE }
+}
 
 /// Arguments of one scan.
 pub struct ScanArgs<'a> {
@@ -59,18 +47,7 @@ pub struct ScanArgs<'a> {
     pub n: u32,
 }
 
-/// The compiled scan kernel.
-pub struct PrefixSum {
-    kernel: Kernel,
-}
-
 impl PrefixSum {
-    pub fn new(ctx: &GpuContext) -> Self {
-        PrefixSum {
-            kernel: Kernel::new(ctx, &DECL),
-        }
-    }
-
     /// Record an exclusive scan of `args.input[..n]` into `args.output`.
     pub fn dispatch(
         &self,
@@ -110,14 +87,14 @@ impl PrefixSum {
         let lv = level.min(SUMS.len() - 1);
         let sums = rec.storage(SUMS[lv], (blocks as u64 + 1) * 4);
         let u = ctx.uniform("scan_u", &ScanUniforms { n, pad: [0; 3] });
-        let bind = self.kernel.bind(
+        let bind = self.bind(
             ctx,
-            &[
-                ("u", &u),
-                ("input", args.input),
-                ("output", args.output),
-                ("block_sums", &sums),
-            ],
+            &ScanBindings {
+                u: &u,
+                input: args.input,
+                output: args.output,
+                block_sums: &sums,
+            },
         )?;
         let groups = groups_1d(n, WORKGROUP_SIZE);
         if n > 0 {
@@ -135,14 +112,14 @@ impl PrefixSum {
                 },
                 level + 1,
             )?;
-            let bind2 = self.kernel.bind(
+            let bind2 = self.bind(
                 ctx,
-                &[
-                    ("u", &u),
-                    ("input", args.input),
-                    ("output", args.output),
-                    ("block_sums", &scanned),
-                ],
+                &ScanBindings {
+                    u: &u,
+                    input: args.input,
+                    output: args.output,
+                    block_sums: &scanned,
+                },
             )?;
             rec.dispatch(&self.kernel, "add_block_offsets", &bind2, groups)?;
         }

@@ -3,7 +3,7 @@
 //! 2023 §4), following `reference::project::project_one` exactly. Also owns
 //! [`CameraUniforms`], the camera/options block every later kernel reads.
 
-use super::kernel::{BindingDecl, BindingKind, Kernel, KernelDecl, Recorder, groups_1d};
+use super::kernel::{Recorder, groups_1d, kernel};
 use super::{GpuContext, GpuError};
 use crate::reference::project::JACOBIAN_CLAMP;
 use crate::types::{RenderCamera, RenderOptions};
@@ -75,50 +75,22 @@ impl CameraUniforms {
     }
 }
 
-pub static DECL: KernelDecl = KernelDecl {
-    name: "project",
-    source: include_str!("../../../../shaders/splat/project.wgsl"),
-    entry_points: &["project_main"],
-    bindings: &[
-        BindingDecl {
-            name: "cam",
-            binding: 0,
-            kind: BindingKind::Uniform,
-        },
-        BindingDecl {
-            name: "means",
-            binding: 1,
-            kind: BindingKind::StorageRead,
-        },
-        BindingDecl {
-            name: "log_scales",
-            binding: 2,
-            kind: BindingKind::StorageRead,
-        },
-        BindingDecl {
-            name: "rotations",
-            binding: 3,
-            kind: BindingKind::StorageRead,
-        },
-        BindingDecl {
-            name: "opacity_logits",
-            binding: 4,
-            kind: BindingKind::StorageRead,
-        },
-        BindingDecl {
-            name: "sh",
-            binding: 5,
-            kind: BindingKind::StorageRead,
-        },
-        BindingDecl {
-            name: "projected",
-            binding: 6,
-            kind: BindingKind::StorageRw,
-        },
-    ],
-    uniform: Some(("CameraUniforms", std::mem::size_of::<CameraUniforms>())),
-    uses_grad_atomics: false,
-};
+kernel! {
+    /// The compiled kernel.
+    pub struct Project;
+    decl DECL = "project";
+    bindings ProjectBindings {
+        cam: uniform CameraUniforms,
+        means: read "array<f32>",
+        log_scales: read "array<f32>",
+        rotations: read "array<f32>",
+        opacity_logits: read "array<f32>",
+        sh: read "array<f32>",
+        projected: read_write "array<ProjectedSplat>",
+    }
+    entry_points { project_main: [WORKGROUP_SIZE] }
+    constants { WORKGROUP_SIZE }
+}
 
 /// Splat parameters resident on the GPU (flat f32 arrays, [`crate::Splats`] layout).
 pub struct ParamBuffers {
@@ -141,18 +113,7 @@ pub struct ProjectArgs<'a> {
     pub projected: &'a wgpu::Buffer,
 }
 
-/// The compiled kernel.
-pub struct Project {
-    kernel: Kernel,
-}
-
 impl Project {
-    pub fn new(ctx: &GpuContext) -> Self {
-        Project {
-            kernel: Kernel::new(ctx, &DECL),
-        }
-    }
-
     pub fn dispatch(
         &self,
         ctx: &GpuContext,
@@ -160,17 +121,17 @@ impl Project {
         a: &ProjectArgs,
     ) -> Result<(), GpuError> {
         let p = a.params;
-        let bind = self.kernel.bind(
+        let bind = self.bind(
             ctx,
-            &[
-                ("cam", a.cam),
-                ("means", &p.means),
-                ("log_scales", &p.log_scales),
-                ("rotations", &p.rotations),
-                ("opacity_logits", &p.opacity_logits),
-                ("sh", &p.sh),
-                ("projected", a.projected),
-            ],
+            &ProjectBindings {
+                cam: a.cam,
+                means: &p.means,
+                log_scales: &p.log_scales,
+                rotations: &p.rotations,
+                opacity_logits: &p.opacity_logits,
+                sh: &p.sh,
+                projected: a.projected,
+            },
         )?;
         rec.dispatch(
             &self.kernel,

@@ -4,7 +4,7 @@
 //! `reference::project_backward`). Also writes ‖dL/d mean2d‖ per splat for
 //! densification statistics.
 
-use super::kernel::{BindingDecl, BindingKind, Kernel, KernelDecl, Recorder, groups_1d};
+use super::kernel::{Recorder, groups_1d, kernel};
 use super::project::{CameraUniforms, ParamBuffers};
 use super::{GpuContext, GpuError};
 
@@ -15,60 +15,24 @@ pub const WORKGROUP_SIZE: u32 = 256;
 /// kernel at 8 storage bindings.
 pub const GEOM_FLOATS: u64 = 12;
 
-pub static DECL: KernelDecl = KernelDecl {
-    name: "project_backward",
-    source: include_str!("../../../../shaders/splat/project_backward.wgsl"),
-    entry_points: &["project_backward_main"],
-    bindings: &[
-        BindingDecl {
-            name: "cam",
-            binding: 0,
-            kind: BindingKind::Uniform,
-        },
-        BindingDecl {
-            name: "means",
-            binding: 1,
-            kind: BindingKind::StorageRead,
-        },
-        BindingDecl {
-            name: "log_scales",
-            binding: 2,
-            kind: BindingKind::StorageRead,
-        },
-        BindingDecl {
-            name: "rotations",
-            binding: 3,
-            kind: BindingKind::StorageRead,
-        },
-        BindingDecl {
-            name: "opacity_logits",
-            binding: 4,
-            kind: BindingKind::StorageRead,
-        },
-        BindingDecl {
-            name: "sh",
-            binding: 5,
-            kind: BindingKind::StorageRead,
-        },
-        BindingDecl {
-            name: "v_proj",
-            binding: 6,
-            kind: BindingKind::StorageRead,
-        },
-        BindingDecl {
-            name: "g_geom",
-            binding: 7,
-            kind: BindingKind::StorageRw,
-        },
-        BindingDecl {
-            name: "g_sh",
-            binding: 8,
-            kind: BindingKind::StorageRw,
-        },
-    ],
-    uniform: Some(("CameraUniforms", std::mem::size_of::<CameraUniforms>())),
-    uses_grad_atomics: false,
-};
+kernel! {
+    /// The compiled kernel.
+    pub struct ProjectBackward;
+    decl DECL = "project_backward";
+    bindings ProjectBackwardBindings {
+        cam: uniform CameraUniforms,
+        means: read "array<f32>",
+        log_scales: read "array<f32>",
+        rotations: read "array<f32>",
+        opacity_logits: read "array<f32>",
+        sh: read "array<f32>",
+        v_proj: read "array<f32>",
+        g_geom: read_write "array<f32>",
+        g_sh: read_write "array<f32>",
+    }
+    entry_points { project_backward_main: [WORKGROUP_SIZE] }
+    constants { WORKGROUP_SIZE }
+}
 
 /// Parameter gradients resident on the GPU (same layout as [`ParamBuffers`]).
 pub struct GradBuffers {
@@ -106,18 +70,7 @@ pub struct ProjectBackwardArgs<'a> {
     pub grads: &'a GradBuffers,
 }
 
-/// The compiled kernel.
-pub struct ProjectBackward {
-    kernel: Kernel,
-}
-
 impl ProjectBackward {
-    pub fn new(ctx: &GpuContext) -> Self {
-        ProjectBackward {
-            kernel: Kernel::new(ctx, &DECL),
-        }
-    }
-
     pub fn dispatch(
         &self,
         ctx: &GpuContext,
@@ -126,19 +79,19 @@ impl ProjectBackward {
     ) -> Result<(), GpuError> {
         let (p, g) = (a.params, a.grads);
         let geom = rec.storage("g_geom", p.n as u64 * GEOM_FLOATS * 4);
-        let bind = self.kernel.bind(
+        let bind = self.bind(
             ctx,
-            &[
-                ("cam", a.cam),
-                ("means", &p.means),
-                ("log_scales", &p.log_scales),
-                ("rotations", &p.rotations),
-                ("opacity_logits", &p.opacity_logits),
-                ("sh", &p.sh),
-                ("v_proj", a.v_proj),
-                ("g_geom", &geom),
-                ("g_sh", &g.sh),
-            ],
+            &ProjectBackwardBindings {
+                cam: a.cam,
+                means: &p.means,
+                log_scales: &p.log_scales,
+                rotations: &p.rotations,
+                opacity_logits: &p.opacity_logits,
+                sh: &p.sh,
+                v_proj: a.v_proj,
+                g_geom: &geom,
+                g_sh: &g.sh,
+            },
         )?;
         rec.dispatch(
             &self.kernel,

@@ -8,7 +8,7 @@
 //! Reference: Merrill & Grimshaw, "High performance and scalable radix
 //! sorting" (2011), in its simplest (non-fused) form.
 
-use super::kernel::{BindingDecl, BindingKind, Kernel, KernelDecl, Recorder, groups_1d};
+use super::kernel::{Recorder, groups_1d, kernel};
 use super::prefix_sum::{PrefixSum, ScanArgs};
 use super::{GpuContext, GpuError};
 use bytemuck::{Pod, Zeroable};
@@ -17,6 +17,8 @@ use bytemuck::{Pod, Zeroable};
 pub const WORKGROUP_SIZE: u32 = 256;
 /// Key bits sorted per pass.
 pub const BITS_PER_PASS: u32 = 4;
+/// Digits per pass (`RADIX` in the shader).
+pub const RADIX: u32 = 1 << BITS_PER_PASS;
 
 /// Uniforms of one pass (16 bytes).
 #[repr(C)]
@@ -29,50 +31,22 @@ pub struct SortUniforms {
     pub digit_mask: u32,
 }
 
-pub static DECL: KernelDecl = KernelDecl {
-    name: "radix_sort",
-    source: include_str!("../../../../shaders/splat/radix_sort.wgsl"),
-    entry_points: &["count", "scatter"],
-    bindings: &[
-        BindingDecl {
-            name: "u",
-            binding: 0,
-            kind: BindingKind::Uniform,
-        },
-        BindingDecl {
-            name: "keys_in",
-            binding: 1,
-            kind: BindingKind::StorageRead,
-        },
-        BindingDecl {
-            name: "values_in",
-            binding: 2,
-            kind: BindingKind::StorageRead,
-        },
-        BindingDecl {
-            name: "keys_out",
-            binding: 3,
-            kind: BindingKind::StorageRw,
-        },
-        BindingDecl {
-            name: "values_out",
-            binding: 4,
-            kind: BindingKind::StorageRw,
-        },
-        BindingDecl {
-            name: "counts",
-            binding: 5,
-            kind: BindingKind::StorageRw,
-        },
-        BindingDecl {
-            name: "offsets",
-            binding: 6,
-            kind: BindingKind::StorageRead,
-        },
-    ],
-    uniform: Some(("SortUniforms", std::mem::size_of::<SortUniforms>())),
-    uses_grad_atomics: false,
-};
+kernel! {
+    /// The compiled sort kernel.
+    pub struct RadixSort;
+    decl DECL = "radix_sort";
+    bindings SortBindings {
+        u: uniform SortUniforms,
+        keys_in: read "array<u32>",
+        values_in: read "array<u32>",
+        keys_out: read_write "array<u32>",
+        values_out: read_write "array<u32>",
+        counts: read_write "array<u32>",
+        offsets: read "array<u32>",
+    }
+    entry_points { count: [WORKGROUP_SIZE], scatter: [WORKGROUP_SIZE] }
+    constants { WORKGROUP_SIZE, RADIX }
+}
 
 /// Arguments of one sort (in place on `keys` / `values`).
 pub struct SortArgs<'a> {
@@ -84,23 +58,12 @@ pub struct SortArgs<'a> {
     pub bits: u32,
 }
 
-/// The compiled sort kernel.
-pub struct RadixSort {
-    kernel: Kernel,
-}
-
 /// Key bits needed to sort values in `0..=max_key`.
 pub fn bits_for(max_key: u32) -> u32 {
     (32 - max_key.leading_zeros()).max(1)
 }
 
 impl RadixSort {
-    pub fn new(ctx: &GpuContext) -> Self {
-        RadixSort {
-            kernel: Kernel::new(ctx, &DECL),
-        }
-    }
-
     /// Record a stable sort of `args.keys[..n]` (with `args.values`) on the
     /// low `args.bits` key bits.
     pub fn dispatch(
@@ -124,8 +87,9 @@ impl RadixSort {
         let bytes = n as u64 * 4;
         let keys_tmp = rec.storage("sort_keys_tmp", bytes);
         let values_tmp = rec.storage("sort_values_tmp", bytes);
-        let counts = rec.storage("sort_counts", num_blocks as u64 * 16 * 4);
-        let offsets = rec.storage("sort_offsets", (num_blocks as u64 * 16 + 1) * 4);
+        let digits = num_blocks as u64 * RADIX as u64;
+        let counts = rec.storage("sort_counts", digits * 4);
+        let offsets = rec.storage("sort_offsets", (digits + 1) * 4);
         let passes = args.bits.div_ceil(BITS_PER_PASS);
         let groups = groups_1d(n, WORKGROUP_SIZE);
         for pass in 0..passes {
@@ -145,17 +109,17 @@ impl RadixSort {
                     digit_mask: (1 << pass_bits) - 1,
                 },
             );
-            let bind = self.kernel.bind(
+            let bind = self.bind(
                 ctx,
-                &[
-                    ("u", &u),
-                    ("keys_in", ki),
-                    ("values_in", vi),
-                    ("keys_out", ko),
-                    ("values_out", vo),
-                    ("counts", &counts),
-                    ("offsets", &offsets),
-                ],
+                &SortBindings {
+                    u: &u,
+                    keys_in: ki,
+                    values_in: vi,
+                    keys_out: ko,
+                    values_out: vo,
+                    counts: &counts,
+                    offsets: &offsets,
+                },
             )?;
             rec.dispatch(&self.kernel, "count", &bind, groups)?;
             scan.dispatch(
@@ -164,7 +128,7 @@ impl RadixSort {
                 &ScanArgs {
                     input: &counts,
                     output: &offsets,
-                    n: num_blocks * 16,
+                    n: num_blocks * RADIX,
                 },
             )?;
             rec.dispatch(&self.kernel, "scatter", &bind, groups)?;

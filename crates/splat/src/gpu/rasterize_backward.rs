@@ -5,70 +5,32 @@
 //! compare-and-swap loop (chosen when the pipeline is built, see
 //! `kernel::ATOMIC_CAS_WGSL`).
 
-use super::kernel::{BindingDecl, BindingKind, Kernel, KernelDecl, Recorder};
+use super::kernel::{Recorder, kernel};
 use super::project::CameraUniforms;
+use super::rasterize::THREADS;
 use super::{GpuContext, GpuError};
 
-/// Workgroup size: one tile of 16×16 pixels, each invocation owning a
-/// column of `PIXELS_PER_THREAD` pixels.
-pub const WORKGROUP_SIZE: [u32; 2] = [16, 1];
-/// Vertically adjacent pixels per invocation (`PPT` in the shader).
-pub const PIXELS_PER_THREAD: u32 = 16;
 /// f32 per splat in the gradient buffer (the `ProjectedGrads` layout).
 pub const GRAD_STRIDE: u64 = 12;
 
-pub static DECL: KernelDecl = KernelDecl {
-    name: "rasterize_backward",
-    source: concat!(
-        include_str!("../../../../shaders/splat/block_lists.wgsl"),
-        include_str!("../../../../shaders/splat/rasterize_backward.wgsl")
-    ),
-    entry_points: &["rasterize_backward_main"],
-    bindings: &[
-        BindingDecl {
-            name: "cam",
-            binding: 0,
-            kind: BindingKind::Uniform,
-        },
-        BindingDecl {
-            name: "projected",
-            binding: 1,
-            kind: BindingKind::StorageRead,
-        },
-        BindingDecl {
-            name: "tile_values",
-            binding: 2,
-            kind: BindingKind::StorageRead,
-        },
-        BindingDecl {
-            name: "ranges",
-            binding: 3,
-            kind: BindingKind::StorageRead,
-        },
-        BindingDecl {
-            name: "final_t",
-            binding: 4,
-            kind: BindingKind::StorageRead,
-        },
-        BindingDecl {
-            name: "last_contrib",
-            binding: 5,
-            kind: BindingKind::StorageRead,
-        },
-        BindingDecl {
-            name: "v_image",
-            binding: 6,
-            kind: BindingKind::StorageRead,
-        },
-        BindingDecl {
-            name: "grads",
-            binding: 7,
-            kind: BindingKind::StorageRw,
-        },
-    ],
-    uniform: Some(("CameraUniforms", std::mem::size_of::<CameraUniforms>())),
-    uses_grad_atomics: true,
-};
+kernel! {
+    /// The compiled kernel.
+    pub struct RasterizeBackward;
+    decl DECL = "rasterize_backward" after ["block_lists"];
+    bindings RasterBackwardBindings {
+        cam: uniform CameraUniforms,
+        projected: read "array<ProjectedSplat>",
+        tile_values: read "array<u32>",
+        ranges: read "array<u32>",
+        final_t: read "array<f32>",
+        last_contrib: read "array<u32>",
+        v_image: read "array<f32>",
+        grads: read_write "array<GradAtomic>",
+    }
+    entry_points { rasterize_backward_main: [THREADS, 1] }
+    constants { THREADS }
+    grad_atomics
+}
 
 /// Buffers of one backward raster.
 pub struct RasterBackwardArgs<'a> {
@@ -85,18 +47,7 @@ pub struct RasterBackwardArgs<'a> {
     pub grid: (u32, u32),
 }
 
-/// The compiled kernel.
-pub struct RasterizeBackward {
-    kernel: Kernel,
-}
-
 impl RasterizeBackward {
-    pub fn new(ctx: &GpuContext) -> Self {
-        RasterizeBackward {
-            kernel: Kernel::new(ctx, &DECL),
-        }
-    }
-
     /// Record: clear `grads`, then accumulate into it.
     pub fn dispatch(
         &self,
@@ -105,18 +56,18 @@ impl RasterizeBackward {
         a: &RasterBackwardArgs,
     ) -> Result<(), GpuError> {
         rec.encoder.clear_buffer(a.grads, 0, None);
-        let bind = self.kernel.bind(
+        let bind = self.bind(
             ctx,
-            &[
-                ("cam", a.cam),
-                ("projected", a.projected),
-                ("tile_values", a.tile_values),
-                ("ranges", a.ranges),
-                ("final_t", a.final_t),
-                ("last_contrib", a.last_contrib),
-                ("v_image", a.v_image),
-                ("grads", a.grads),
-            ],
+            &RasterBackwardBindings {
+                cam: a.cam,
+                projected: a.projected,
+                tile_values: a.tile_values,
+                ranges: a.ranges,
+                final_t: a.final_t,
+                last_contrib: a.last_contrib,
+                v_image: a.v_image,
+                grads: a.grads,
+            },
         )?;
         rec.dispatch(
             &self.kernel,

@@ -7,7 +7,7 @@
 //! blurred again (the window is self-adjoint) and combined into dL/d image,
 //! which is added to the L1 gradient already in `v_image`.
 
-use super::kernel::{BindingDecl, BindingKind, Kernel, KernelDecl, Recorder, groups_1d};
+use super::kernel::{Recorder, groups_1d, kernel};
 use super::{GpuContext, GpuError};
 use crate::metrics::{SSIM_RADIUS, SSIM_SIGMA, gaussian_kernel};
 use bytemuck::{Pod, Zeroable};
@@ -37,55 +37,29 @@ pub struct SsimUniforms {
     pub taps: [f32; 12],
 }
 
-pub static DECL: KernelDecl = KernelDecl {
-    name: "ssim",
-    source: include_str!("../../../../shaders/splat/ssim.wgsl"),
-    entry_points: &["products", "blur_h", "blur_v", "ssim_terms", "ssim_grad"],
-    bindings: &[
-        BindingDecl {
-            name: "u",
-            binding: 0,
-            kind: BindingKind::Uniform,
-        },
-        BindingDecl {
-            name: "image",
-            binding: 1,
-            kind: BindingKind::StorageRead,
-        },
-        BindingDecl {
-            name: "target_rgb",
-            binding: 2,
-            kind: BindingKind::StorageRead,
-        },
-        BindingDecl {
-            name: "mask",
-            binding: 3,
-            kind: BindingKind::StorageRead,
-        },
-        BindingDecl {
-            name: "src",
-            binding: 4,
-            kind: BindingKind::StorageRead,
-        },
-        BindingDecl {
-            name: "dst",
-            binding: 5,
-            kind: BindingKind::StorageRw,
-        },
-        BindingDecl {
-            name: "v_image",
-            binding: 6,
-            kind: BindingKind::StorageRw,
-        },
-        BindingDecl {
-            name: "partials",
-            binding: 7,
-            kind: BindingKind::StorageRw,
-        },
-    ],
-    uniform: Some(("SsimUniforms", std::mem::size_of::<SsimUniforms>())),
-    uses_grad_atomics: false,
-};
+kernel! {
+    /// The compiled kernel.
+    pub struct Ssim;
+    decl DECL = "ssim";
+    bindings SsimBindings {
+        u: uniform SsimUniforms,
+        image: read "array<f32>",
+        target_rgb: read "array<f32>",
+        mask: read "array<f32>",
+        src: read "array<f32>",
+        dst: read_write "array<f32>",
+        v_image: read_write "array<f32>",
+        partials: read_write "array<f32>",
+    }
+    entry_points {
+        products: [WORKGROUP_SIZE],
+        blur_h: [WORKGROUP_SIZE],
+        blur_v: [WORKGROUP_SIZE],
+        ssim_terms: [WORKGROUP_SIZE],
+        ssim_grad: [WORKGROUP_SIZE],
+    }
+    constants { WORKGROUP_SIZE, SEG = BLUR_SEGMENT }
+}
 
 /// Buffers of one D-SSIM evaluation.
 pub struct SsimArgs<'a> {
@@ -107,25 +81,17 @@ pub struct SsimArgs<'a> {
     pub lambda: f32,
 }
 
-/// The compiled kernel.
-pub struct Ssim {
-    kernel: Kernel,
-    taps: [f32; 12],
+/// The 11 Gaussian taps of the SSIM window as f32, padded to 12.
+fn window_taps() -> [f32; 12] {
+    let k = gaussian_kernel(SSIM_SIGMA, SSIM_RADIUS);
+    let mut taps = [0.0f32; 12];
+    for (t, v) in taps.iter_mut().zip(&k) {
+        *t = *v as f32;
+    }
+    taps
 }
 
 impl Ssim {
-    pub fn new(ctx: &GpuContext) -> Self {
-        let k = gaussian_kernel(SSIM_SIGMA, SSIM_RADIUS);
-        let mut taps = [0.0f32; 12];
-        for (t, v) in taps.iter_mut().zip(&k) {
-            *t = *v as f32;
-        }
-        Ssim {
-            kernel: Kernel::new(ctx, &DECL),
-            taps,
-        }
-    }
-
     /// Record the seven dispatches.
     pub fn dispatch(
         &self,
@@ -148,7 +114,7 @@ impl Ssim {
             norm: a.norm,
             lambda: a.lambda,
             pad: [0.0; 2],
-            taps: self.taps,
+            taps: window_taps(),
         };
         let [s0, s1] = a.scratch;
         // (entry, maps for the blurs, src, dst)
@@ -169,18 +135,18 @@ impl Ssim {
                     ..base
                 },
             );
-            let bind = self.kernel.bind(
+            let bind = self.bind(
                 ctx,
-                &[
-                    ("u", &u),
-                    ("image", a.image),
-                    ("target_rgb", a.target),
-                    ("mask", a.mask),
-                    ("src", src),
-                    ("dst", dst),
-                    ("v_image", a.v_image),
-                    ("partials", a.partials),
-                ],
+                &SsimBindings {
+                    u: &u,
+                    image: a.image,
+                    target_rgb: a.target,
+                    mask: a.mask,
+                    src,
+                    dst,
+                    v_image: a.v_image,
+                    partials: a.partials,
+                },
             )?;
             let seg = |len: u32| len.div_ceil(BLUR_SEGMENT);
             let items = match entry {

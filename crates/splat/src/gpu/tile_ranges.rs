@@ -2,7 +2,7 @@
 //! tile-sorted key list, which the rasterizers walk. Reference: Kerbl et al.
 //! (2023), §6 ("identify the start and end of each tile's range").
 
-use super::kernel::{BindingDecl, BindingKind, Kernel, KernelDecl, Recorder, groups_1d};
+use super::kernel::{Recorder, groups_1d, kernel};
 use super::{GpuContext, GpuError};
 use bytemuck::{Pod, Zeroable};
 
@@ -19,30 +19,18 @@ pub struct RangeUniforms {
     pub pad: [u32; 2],
 }
 
-pub static DECL: KernelDecl = KernelDecl {
-    name: "tile_ranges",
-    source: include_str!("../../../../shaders/splat/tile_ranges.wgsl"),
-    entry_points: &["ranges_main"],
-    bindings: &[
-        BindingDecl {
-            name: "u",
-            binding: 0,
-            kind: BindingKind::Uniform,
-        },
-        BindingDecl {
-            name: "tile_keys",
-            binding: 1,
-            kind: BindingKind::StorageRead,
-        },
-        BindingDecl {
-            name: "ranges",
-            binding: 2,
-            kind: BindingKind::StorageRw,
-        },
-    ],
-    uniform: Some(("RangeUniforms", std::mem::size_of::<RangeUniforms>())),
-    uses_grad_atomics: false,
-};
+kernel! {
+    /// The compiled kernel.
+    pub struct TileRanges;
+    decl DECL = "tile_ranges";
+    bindings RangeBindings {
+        u: uniform RangeUniforms,
+        tile_keys: read "array<u32>",
+        ranges: read_write "array<u32>",
+    }
+    entry_points { ranges_main: [WORKGROUP_SIZE] }
+    constants { WORKGROUP_SIZE }
+}
 
 /// Arguments: sorted tile keys in, `2 × num_tiles` u32 ranges out.
 pub struct RangeArgs<'a> {
@@ -52,18 +40,7 @@ pub struct RangeArgs<'a> {
     pub num_tiles: u32,
 }
 
-/// The compiled kernel.
-pub struct TileRanges {
-    kernel: Kernel,
-}
-
 impl TileRanges {
-    pub fn new(ctx: &GpuContext) -> Self {
-        TileRanges {
-            kernel: Kernel::new(ctx, &DECL),
-        }
-    }
-
     /// Record: clear `ranges`, then mark the start and end of every run.
     pub fn dispatch(
         &self,
@@ -83,13 +60,13 @@ impl TileRanges {
                 pad: [0; 2],
             },
         );
-        let bind = self.kernel.bind(
+        let bind = self.bind(
             ctx,
-            &[
-                ("u", &u),
-                ("tile_keys", args.tile_keys),
-                ("ranges", args.ranges),
-            ],
+            &RangeBindings {
+                u: &u,
+                tile_keys: args.tile_keys,
+                ranges: args.ranges,
+            },
         )?;
         rec.dispatch(
             &self.kernel,

@@ -1,7 +1,10 @@
-//! Every shader parses and validates with naga (both atomics variants where
-//! relevant), and its `@group(0) @binding(n)` globals match the host module's
-//! declared table exactly: name, binding number, uniform vs storage,
-//! read-only vs read-write, uniform struct name and byte size, entry points.
+//! Every assembled shader (common code, injected constants and bindings,
+//! kernel source) parses and validates with naga in every variant, and
+//! matches its `kernel!` declaration: each `@group(0) @binding(n)` global is
+//! the declared n-th binding (the `.wgsl` files declare none of their own),
+//! the uniform struct has the Rust struct's name and byte size, and the
+//! entry points are exactly the declared ones with the declared
+//! `@workgroup_size`.
 
 use crate::gpu::kernel::{BindingKind, shader_source};
 use naga::{AddressSpace, StorageAccess, TypeInner};
@@ -21,7 +24,7 @@ fn parse_and_validate(what: &str, src: &str) -> naga::Module {
 }
 
 #[test]
-fn shaders_match_host_binding_tables() {
+fn shaders_match_host_declarations() {
     assert!(!crate::gpu::ALL_KERNELS.is_empty());
     for decl in crate::gpu::ALL_KERNELS {
         let variants: &[bool] = if decl.uses_grad_atomics {
@@ -36,72 +39,56 @@ fn shaders_match_host_binding_tables() {
                 decl.name
             );
             let module = parse_and_validate(&what, &src);
-            let mut seen = Vec::new();
+            let mut seen = 0;
             for (_, var) in module.global_variables.iter() {
                 let Some(rb) = &var.binding else { continue };
                 let name = var.name.clone().unwrap_or_default();
-                assert_eq!(rb.group, 0, "{}: {name} not in group 0", decl.name);
+                assert_eq!(rb.group, 0, "{what}: {name} not in group 0");
                 let b = decl
                     .bindings
-                    .iter()
-                    .find(|b| b.name == name)
-                    .unwrap_or_else(|| {
-                        panic!(
-                            "{}: shader binding {name} missing from host table",
-                            decl.name
-                        )
-                    });
-                assert_eq!(
-                    b.binding, rb.binding,
-                    "{}: {name} binding number",
-                    decl.name
-                );
+                    .get(rb.binding as usize)
+                    .unwrap_or_else(|| panic!("{what}: binding {} undeclared", rb.binding));
+                assert_eq!(b.name, name, "{what}: binding {}", rb.binding);
                 let kind = match var.space {
                     AddressSpace::Uniform => BindingKind::Uniform,
                     AddressSpace::Storage { access } if access.contains(StorageAccess::STORE) => {
                         BindingKind::StorageRw
                     }
                     AddressSpace::Storage { .. } => BindingKind::StorageRead,
-                    other => panic!("{}: {name} has address space {other:?}", decl.name),
+                    other => panic!("{what}: {name} has address space {other:?}"),
                 };
-                assert_eq!(b.kind, kind, "{}: {name} access", decl.name);
+                assert_eq!(b.kind, kind, "{what}: {name} access");
                 if kind == BindingKind::Uniform {
-                    let (uname, usize_) = decl
-                        .uniform
-                        .unwrap_or_else(|| panic!("{}: undeclared uniform", decl.name));
+                    assert_eq!(rb.binding, 0, "{what}: the uniform is binding 0");
                     let ty = &module.types[var.ty];
-                    assert_eq!(
-                        ty.name.as_deref(),
-                        Some(uname),
-                        "{}: uniform struct name",
-                        decl.name
-                    );
+                    assert_eq!(ty.name.as_deref(), Some(b.ty), "{what}: uniform struct");
                     match &ty.inner {
-                        TypeInner::Struct { span, .. } => {
-                            assert_eq!(
-                                *span as usize, usize_,
-                                "{}: uniform {uname} size",
-                                decl.name
-                            )
-                        }
-                        other => panic!("{}: uniform is {other:?}", decl.name),
+                        TypeInner::Struct { span, .. } => assert_eq!(
+                            *span as usize, decl.uniform_size,
+                            "{what}: uniform {} size (WGSL vs Rust)",
+                            b.ty
+                        ),
+                        other => panic!("{what}: uniform is {other:?}"),
                     }
                 }
-                seen.push(name);
+                seen += 1;
             }
-            for b in decl.bindings {
-                assert!(
-                    seen.iter().any(|s| s == b.name),
-                    "{}: host binding {} not in shader",
-                    decl.name,
-                    b.name
-                );
-            }
+            assert_eq!(seen, decl.bindings.len(), "{what}: bindings in the shader");
+            assert_eq!(
+                module.entry_points.len(),
+                decl.entry_points.len(),
+                "{what}: entry points"
+            );
             for ep in decl.entry_points {
-                assert!(
-                    module.entry_points.iter().any(|e| e.name == *ep),
-                    "{}: entry point {ep} missing",
-                    decl.name
+                let found = module
+                    .entry_points
+                    .iter()
+                    .find(|e| e.name == ep.name)
+                    .unwrap_or_else(|| panic!("{what}: entry point {} missing", ep.name));
+                assert_eq!(
+                    found.workgroup_size, ep.workgroup_size,
+                    "{what}: @workgroup_size of {} (shader vs host)",
+                    ep.name
                 );
             }
         }
