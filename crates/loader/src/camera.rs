@@ -212,11 +212,6 @@ impl Intrinsics {
         }
     }
 
-    /// The 3×3 calibration matrix K.
-    pub fn k_matrix(&self) -> nalgebra::Matrix3<f64> {
-        nalgebra::Matrix3::new(self.fx, 0.0, self.cx, 0.0, self.fy, self.cy, 0.0, 0.0, 1.0)
-    }
-
     /// Project a camera-space point (OpenCV axes) to pixels.
     pub fn project(&self, p: nalgebra::Vector3<f64>) -> Option<(f64, f64)> {
         if p.z <= 1e-9 {

@@ -178,16 +178,6 @@ pub struct Inter<T> {
     pub color_clamped: [bool; 3],
 }
 
-pub fn mat3_mul<T: Real>(a: &[[T; 3]; 3], b: &[[T; 3]; 3]) -> [[T; 3]; 3] {
-    let mut r = [[T::default(); 3]; 3];
-    for i in 0..3 {
-        for j in 0..3 {
-            r[i][j] = a[i][0] * b[0][j] + a[i][1] * b[1][j] + a[i][2] * b[2][j];
-        }
-    }
-    r
-}
-
 /// Rotation matrix of a unit quaternion (w, x, y, z).
 pub fn quat_to_rot<T: Real>(q: [T; 4]) -> [[T; 3]; 3] {
     let [w, x, y, z] = q;
