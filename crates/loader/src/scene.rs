@@ -1,4 +1,4 @@
-//! The scene folder (see DESIGN.md): frames in capture order (sorted file
+//! The scene folder (see `docs/design.md`, "Conventions"): frames in capture order (sorted file
 //! names in `images/`), cameras and poses (from `sparse/0`, else
 //! `transforms.json`), masks (`masks/<name>.png`, 255 keep), the
 //! NeRF On-the-go split and ground-truth motion (`gt_motion/<stem>.png`).

@@ -1,4 +1,4 @@
-//! One module per subcommand of the CLI contract in DESIGN.md.
+//! One module per subcommand of the CLI contract in `docs/design.md`.
 
 pub mod bench_mask;
 pub mod bench_train;

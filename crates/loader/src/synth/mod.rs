@@ -3,7 +3,7 @@
 //! A scene spec (`scenes/*.toml`, [`SceneSpec`]) describes a textured static
 //! street with real parallax, a handheld camera path and pedestrians walking
 //! across the view. [`generate`] renders it with the software rasteriser in
-//! [`raster`] and writes a scene folder in the layout of DESIGN.md:
+//! [`raster`] and writes a scene folder in the layout of `docs/design.md`:
 //! `images/` (training frames with pedestrians, then clean held-out
 //! `test_NNN.png` views), `clean/` (each training frame without pedestrians),
 //! `gt_motion/` (255 where pedestrians cover ≥ 50 % of a pixel's samples),
