@@ -18,13 +18,25 @@
 //!
 //! then copies the model to `scene/sparse/0` (or a chosen folder). COLMAP's
 //! logs stay in the work folder; a [`ColmapReport`] says how it went.
+//!
+//! The database is kept in the work folder and reused when it was built from
+//! the same images, masks and settings ([`crate::resume`]): COLMAP skips
+//! images already extracted and pairs already matched, so an interrupted run
+//! resumes. When the mapper builds no model at all (typically "No good
+//! initial image pair found"), it is retried once with relaxed initialisation
+//! settings ([`relaxed_init_args`]).
 
 use crate::error::{PoseError, Result};
 use crate::model_info::read_model_info;
-use crate::process::{StepOutcome, colmap_version, log_tail, require_success, run_step};
+use crate::process::{
+    StepOutcome, colmap_version, log_tail, require_success, run_step_cancellable,
+};
+use crate::progress::{Count, Unit, parse_line};
+use crate::resume::{self, Decision, FeatureKey, MatchKey, ResumeState};
 use loader::CameraModel;
 use serde::{Deserialize, Serialize};
 use std::path::{Path, PathBuf};
+use std::sync::atomic::AtomicBool;
 use std::time::Instant;
 
 /// How image pairs are chosen for matching.
@@ -83,6 +95,115 @@ pub struct ColmapOptions {
     /// Write an undistorted PINHOLE copy when the camera has distortion.
     /// Default true.
     pub undistort: bool,
+    /// Use every `stride`-th image (in name order) for COLMAP
+    /// (`--image_list_path`). Default 1 (all).
+    pub stride: usize,
+    /// Mapper settings (bundle-adjustment effort, initialisation).
+    pub mapper: MapperOptions,
+    /// Retry the mapper once with [`relaxed_init_args`] when it builds no
+    /// model. Default true.
+    pub retry_init: bool,
+}
+
+/// Incremental-mapper settings. `Default` is COLMAP 3.8's own;
+/// [`MapperOptions::video`] bounds the bundle-adjustment effort the way
+/// `colmap automatic_reconstructor --data_type video --quality low` does.
+#[derive(Debug, Clone, Copy, PartialEq, Serialize, Deserialize)]
+#[serde(default)]
+pub struct MapperOptions {
+    /// `--Mapper.ba_local_max_num_iterations` (COLMAP: 25).
+    pub ba_local_max_num_iterations: u32,
+    /// `--Mapper.ba_global_max_num_iterations` (COLMAP: 50).
+    pub ba_global_max_num_iterations: u32,
+    /// `--Mapper.ba_global_max_refinements` (COLMAP: 5).
+    pub ba_global_max_refinements: u32,
+    /// Global BA runs when the model grew by this factor in images
+    /// (`--Mapper.ba_global_images_ratio`, COLMAP: 1.1).
+    pub ba_global_images_ratio: f64,
+    /// ... or in points (`--Mapper.ba_global_points_ratio`, COLMAP: 1.1).
+    pub ba_global_points_ratio: f64,
+    /// Smallest triangulation angle of the initial pair, degrees
+    /// (`--Mapper.init_min_tri_angle`, COLMAP: 16).
+    pub init_min_tri_angle: f64,
+}
+
+impl Default for MapperOptions {
+    fn default() -> Self {
+        MapperOptions {
+            ba_local_max_num_iterations: 25,
+            ba_global_max_num_iterations: 50,
+            ba_global_max_refinements: 5,
+            ba_global_images_ratio: 1.1,
+            ba_global_points_ratio: 1.1,
+            init_min_tri_angle: 16.0,
+        }
+    }
+}
+
+impl MapperOptions {
+    /// COLMAP's video preset with its low-quality bundle adjustment
+    /// (`OptionManager::ModifyForVideoData` then `ModifyForLowQuality`):
+    /// initial triangulation angle halved (8°), global BA only after the
+    /// model grew 1.4 × 1.2 = 1.68-fold, local / global BA iterations halved
+    /// (12 / 25), two global refinements. Consecutive video frames overlap
+    /// heavily, so the model needs far fewer global adjustments.
+    pub fn video() -> Self {
+        let d = MapperOptions::default();
+        MapperOptions {
+            ba_local_max_num_iterations: d.ba_local_max_num_iterations / 2,
+            ba_global_max_num_iterations: d.ba_global_max_num_iterations / 2,
+            ba_global_max_refinements: 2,
+            ba_global_images_ratio: 1.4 * 1.2,
+            ba_global_points_ratio: 1.4 * 1.2,
+            init_min_tri_angle: d.init_min_tri_angle / 2.0,
+        }
+    }
+
+    fn args(&self) -> Vec<String> {
+        let mut a = Vec::new();
+        a.extend(arg(
+            "Mapper.ba_local_max_num_iterations",
+            self.ba_local_max_num_iterations,
+        ));
+        a.extend(arg(
+            "Mapper.ba_global_max_num_iterations",
+            self.ba_global_max_num_iterations,
+        ));
+        a.extend(arg(
+            "Mapper.ba_global_max_refinements",
+            self.ba_global_max_refinements,
+        ));
+        a.extend(arg(
+            "Mapper.ba_global_images_ratio",
+            self.ba_global_images_ratio,
+        ));
+        a.extend(arg(
+            "Mapper.ba_global_points_ratio",
+            self.ba_global_points_ratio,
+        ));
+        a.extend(arg("Mapper.init_min_tri_angle", self.init_min_tri_angle));
+        a
+    }
+}
+
+/// The settings of the one retry after the mapper built no model. COLMAP
+/// already halves the initial pair's inlier count and triangulation angle
+/// twice before it gives up; the retry starts from half the inliers (50) and
+/// half the angle, also accepts initial pairs along the viewing direction
+/// (forward motion ≤ 0.995 instead of 0.95: a camera walking forward), needs
+/// 15 instead of 30 inliers to register a further image, and keeps models of
+/// 3 or more images (COLMAP: 10, which discards a short clip's model).
+pub fn relaxed_init_args(mapper: &MapperOptions) -> Vec<String> {
+    let mut a = Vec::new();
+    a.extend(arg("Mapper.init_min_num_inliers", 50));
+    a.extend(arg("Mapper.init_max_forward_motion", 0.995));
+    a.extend(arg("Mapper.abs_pose_min_num_inliers", 15));
+    a.extend(arg("Mapper.min_model_size", 3));
+    a.extend(arg(
+        "Mapper.init_min_tri_angle",
+        mapper.init_min_tri_angle / 2.0,
+    ));
+    a
 }
 
 impl Default for ColmapOptions {
@@ -100,6 +221,9 @@ impl Default for ColmapOptions {
             threads: -1,
             seed: 0,
             undistort: true,
+            stride: 1,
+            mapper: MapperOptions::default(),
+            retry_init: true,
         }
     }
 }
@@ -123,6 +247,27 @@ impl ColmapOptions {
             return Err(PoseError::Invalid(format!(
                 "threads must be -1 (all) or ≥ 1, got {}",
                 self.threads
+            )));
+        }
+        if self.stride == 0 {
+            return Err(PoseError::Invalid("stride must be ≥ 1".into()));
+        }
+        let m = &self.mapper;
+        if m.ba_local_max_num_iterations == 0 || m.ba_global_max_num_iterations == 0 {
+            return Err(PoseError::Invalid(
+                "bundle-adjustment iterations must be ≥ 1".into(),
+            ));
+        }
+        if !(m.ba_global_images_ratio >= 1.0 && m.ba_global_points_ratio >= 1.0) {
+            return Err(PoseError::Invalid(format!(
+                "global BA ratios must be ≥ 1, got {} / {}",
+                m.ba_global_images_ratio, m.ba_global_points_ratio
+            )));
+        }
+        if !(m.init_min_tri_angle > 0.0 && m.init_min_tri_angle < 90.0) {
+            return Err(PoseError::Invalid(format!(
+                "init_min_tri_angle must be in (0°, 90°), got {}",
+                m.init_min_tri_angle
             )));
         }
         if self.loop_detection && self.matcher == Matcher::Exhaustive {
@@ -176,8 +321,11 @@ pub enum Progress {
         index: usize,
         of: usize,
     },
-    /// A progress line from COLMAP (`Processed file [3/40]`, ...).
-    Line { step: String, line: String },
+    /// A count read from COLMAP's log ([`crate::progress`]); the mapper's
+    /// total is filled in with the number of images.
+    Count { step: String, count: Count },
+    /// A note from the runner (resume decision, retry).
+    Note { step: String, message: String },
     /// The step finished after `seconds`.
     Finished { step: String, seconds: f64 },
 }
@@ -223,6 +371,13 @@ pub struct ColmapReport {
     pub undistorted_dir: Option<PathBuf>,
     /// Work folder with the database, raw models and logs.
     pub work_dir: PathBuf,
+    /// What happened to the kept database ([`crate::resume`]).
+    pub database: Decision,
+    /// Images whose features came from the kept database.
+    pub features_reused: usize,
+    /// The mapper built no model at first and was retried with relaxed
+    /// initialisation settings.
+    pub init_retried: bool,
     /// Wall time per step.
     pub timings: Vec<StepTime>,
     /// Total wall time, seconds.
@@ -304,28 +459,45 @@ fn fresh_dir(dir: &Path) -> Result<()> {
 struct Runner<'a> {
     opts: &'a ColmapOptions,
     progress: &'a mut dyn FnMut(Progress),
+    cancel: &'a AtomicBool,
     timings: Vec<StepTime>,
     index: usize,
     of: usize,
     work: PathBuf,
+    /// Total for counts whose line does not carry one (the mapper).
+    images: u64,
 }
 
 impl Runner<'_> {
-    fn step(&mut self, step: &str, args: Vec<String>) -> Result<StepOutcome> {
+    /// Run one COLMAP step logging to `work/<log>.log`.
+    fn step(&mut self, step: &str, log: &str, args: Vec<String>) -> Result<StepOutcome> {
         (self.progress)(Progress::Started {
             step: step.to_string(),
             index: self.index,
             of: self.of,
         });
         self.index += 1;
-        let log = self.work.join(format!("{step}.log"));
+        let log = self.work.join(format!("{log}.log"));
         let progress = &mut *self.progress;
-        let out = run_step(&self.opts.colmap, step, &args, &log, &mut |line| {
-            progress(Progress::Line {
-                step: step.to_string(),
-                line: line.to_string(),
-            })
-        })?;
+        let images = self.images;
+        let out = run_step_cancellable(
+            &self.opts.colmap,
+            step,
+            &args,
+            &log,
+            &mut |line| {
+                if let Some(mut count) = parse_line(line) {
+                    if count.unit == Unit::Registered {
+                        count.total = Some(images);
+                    }
+                    progress(Progress::Count {
+                        step: step.to_string(),
+                        count,
+                    });
+                }
+            },
+            self.cancel,
+        )?;
         (self.progress)(Progress::Finished {
             step: step.to_string(),
             seconds: out.seconds,
@@ -336,6 +508,88 @@ impl Runner<'_> {
         });
         Ok(out)
     }
+
+    fn note(&mut self, step: &str, message: String) {
+        (self.progress)(Progress::Note {
+            step: step.to_string(),
+            message,
+        });
+    }
+}
+
+/// Remove the database and its SQLite side files.
+fn remove_database(db: &Path) -> Result<()> {
+    let mut side = db.as_os_str().to_os_string();
+    side.push("-shm");
+    let shm = PathBuf::from(&side);
+    let mut side = db.as_os_str().to_os_string();
+    side.push("-wal");
+    let wal = PathBuf::from(&side);
+    for f in [db.to_path_buf(), shm, wal] {
+        if f.exists() {
+            std::fs::remove_file(&f).map_err(|e| PoseError::io(&f, e))?;
+        }
+    }
+    Ok(())
+}
+
+/// The keys of what the database holds for these inputs and options.
+fn resume_keys(
+    paths: &ColmapPaths,
+    opts: &ColmapOptions,
+    names: &[String],
+    version: &str,
+) -> Result<(FeatureKey, MatchKey)> {
+    let images = names
+        .iter()
+        .map(|n| resume::file_key_stat(&paths.images, n))
+        .collect::<Result<Vec<_>>>()?;
+    let masks = if opts.use_masks {
+        names
+            .iter()
+            .map(|n| resume::file_key_hash(&paths.masks, &format!("{n}.png")))
+            .collect::<Result<Vec<_>>>()?
+    } else {
+        Vec::new()
+    };
+    let kv = |k: &str, v: String| (k.to_string(), v);
+    let features = FeatureKey {
+        colmap_version: version.to_string(),
+        images,
+        masks,
+        settings: vec![
+            kv("images", path_str(&paths.images)),
+            kv("camera_model", opts.camera_model.name().to_string()),
+            kv("single_camera", opts.single_camera.to_string()),
+            kv("max_image_size", opts.max_image_size.to_string()),
+            kv("max_num_features", opts.max_num_features.to_string()),
+            kv("seed", opts.seed.to_string()),
+        ],
+    };
+    let matching = MatchKey {
+        settings: vec![
+            kv("matcher", opts.matcher.step().to_string()),
+            kv("overlap", opts.overlap.to_string()),
+            kv("loop_detection", opts.loop_detection.to_string()),
+            kv("seed", opts.seed.to_string()),
+        ],
+    };
+    Ok((features, matching))
+}
+
+/// Models the mapper wrote into `sparse`, with at least one image.
+fn read_models(sparse: &Path) -> Result<Vec<(crate::model_info::ModelInfo, PathBuf)>> {
+    let mut models = Vec::new();
+    if let Ok(rd) = std::fs::read_dir(sparse) {
+        for e in rd.flatten() {
+            let p = e.path();
+            if p.join("images.bin").is_file() {
+                models.push((read_model_info(&p)?, p));
+            }
+        }
+    }
+    models.retain(|(m, _)| m.registered() > 0);
+    Ok(models)
 }
 
 /// Run the whole pose stage on a scene. See the module documentation.
@@ -344,15 +598,33 @@ pub fn run_colmap(
     opts: &ColmapOptions,
     progress: &mut dyn FnMut(Progress),
 ) -> Result<ColmapReport> {
+    run_colmap_cancellable(paths, opts, progress, &AtomicBool::new(false))
+}
+
+/// [`run_colmap`] that stops with [`PoseError::Cancelled`] once `cancel` is
+/// set (the running COLMAP process is killed; the database keeps what was
+/// done and a rerun resumes from it).
+pub fn run_colmap_cancellable(
+    paths: &ColmapPaths,
+    opts: &ColmapOptions,
+    progress: &mut dyn FnMut(Progress),
+    cancel: &AtomicBool,
+) -> Result<ColmapReport> {
     opts.validate()?;
     let t0 = Instant::now();
     let version = colmap_version(&opts.colmap)?;
-    let names = list_images(&paths.images)?;
+    let all_names = list_images(&paths.images)?;
+    let names: Vec<String> = all_names.iter().step_by(opts.stride).cloned().collect();
     if names.len() < 2 {
         return Err(PoseError::Invalid(format!(
-            "{}: {} images found; structure from motion needs at least 2",
+            "{}: {} images{}; structure from motion needs at least 2",
             paths.images.display(),
-            names.len()
+            names.len(),
+            if opts.stride > 1 {
+                format!(" at stride {}", opts.stride)
+            } else {
+                String::new()
+            }
         )));
     }
     if opts.use_masks {
@@ -360,32 +632,67 @@ pub fn run_colmap(
     }
     std::fs::create_dir_all(&paths.work).map_err(|e| PoseError::io(&paths.work, e))?;
     let db = paths.work.join("database.db");
-    for f in [
-        db.clone(),
-        paths.work.join("database.db-shm"),
-        paths.work.join("database.db-wal"),
-    ] {
-        if f.exists() {
-            std::fs::remove_file(&f).map_err(|e| PoseError::io(&f, e))?;
-        }
-    }
+    let state_path = paths.work.join("resume.json");
+    let (feature_key, match_key) = resume_keys(paths, opts, &names, &version)?;
+    let saved = resume::load(&state_path);
+    let decision = resume::decide(saved.as_ref(), db.is_file(), &feature_key, &match_key);
     let sparse = paths.work.join("sparse");
     fresh_dir(&sparse)?;
+    let list = paths.work.join("image_list.txt");
+    let mut text = names.join("\n");
+    text.push('\n');
+    std::fs::write(&list, text).map_err(|e| PoseError::io(&list, e))?;
 
     let mut r = Runner {
         opts,
         progress,
+        cancel,
         timings: Vec::new(),
         index: 0,
         of: if opts.undistort { 4 } else { 3 },
         work: paths.work.clone(),
+        images: names.len() as u64,
     };
     let seed = arg("random_seed", opts.seed);
+
+    match decision {
+        Decision::Fresh => {
+            remove_database(&db)?;
+            // Written before extraction starts: an interrupted extraction
+            // leaves a database that matches this state.
+            resume::save(
+                &state_path,
+                &ResumeState {
+                    features: feature_key.clone(),
+                    matching: None,
+                },
+            )?;
+        }
+        Decision::KeepFeatures => {
+            r.note(
+                "database_cleaner",
+                "matching settings changed: clearing the kept matches".into(),
+            );
+            let mut a: Vec<String> = Vec::new();
+            a.extend(arg("database_path", path_str(&db)));
+            a.extend(arg("type", "matches"));
+            let out = r.step("database_cleaner", "database_cleaner", a)?;
+            require_success("database_cleaner", &out)?;
+        }
+        Decision::KeepAll => r.note(
+            "feature_extractor",
+            format!(
+                "resuming from the kept database {} (done images and pairs are skipped)",
+                db.display()
+            ),
+        ),
+    }
 
     // 1. Features.
     let mut a: Vec<String> = Vec::new();
     a.extend(arg("database_path", path_str(&db)));
     a.extend(arg("image_path", path_str(&paths.images)));
+    a.extend(arg("image_list_path", path_str(&list)));
     a.extend(arg("ImageReader.camera_model", opts.camera_model.name()));
     a.extend(arg(
         "ImageReader.single_camera",
@@ -402,10 +709,22 @@ pub fn run_colmap(
         opts.max_num_features,
     ));
     a.extend(seed.clone());
-    let out = r.step("feature_extractor", a)?;
+    let out = r.step("feature_extractor", "feature_extractor", a)?;
     require_success("feature_extractor", &out)?;
+    let features_reused = std::fs::read_to_string(&out.log)
+        .unwrap_or_default()
+        .lines()
+        .filter(|l| l.contains("SKIP: Features for image already extracted"))
+        .count();
 
     // 2. Matching.
+    resume::save(
+        &state_path,
+        &ResumeState {
+            features: feature_key,
+            matching: Some(match_key),
+        },
+    )?;
     let mut a: Vec<String> = Vec::new();
     a.extend(arg("database_path", path_str(&db)));
     a.extend(arg("SiftMatching.use_gpu", 0));
@@ -419,31 +738,51 @@ pub fn run_colmap(
     }
     a.extend(seed.clone());
     let step = opts.matcher.step();
-    let out = r.step(step, a)?;
+    let out = r.step(step, step, a)?;
     require_success(step, &out)?;
 
-    // 3. Mapping.
+    // 3. Mapping, retried once with relaxed initialisation.
     let mut a: Vec<String> = Vec::new();
     a.extend(arg("database_path", path_str(&db)));
     a.extend(arg("image_path", path_str(&paths.images)));
     a.extend(arg("output_path", path_str(&sparse)));
     a.extend(arg("Mapper.num_threads", opts.threads));
+    a.extend(opts.mapper.args());
     a.extend(seed.clone());
-    let out = r.step("mapper", a)?;
-    let mut models = Vec::new();
-    if let Ok(rd) = std::fs::read_dir(&sparse) {
-        for e in rd.flatten() {
-            let p = e.path();
-            if p.join("images.bin").is_file() {
-                models.push((read_model_info(&p)?, p));
-            }
-        }
+    let mut out = r.step("mapper", "mapper", a.clone())?;
+    let mut models = read_models(&sparse)?;
+    let no_init = |o: &StepOutcome| {
+        std::fs::read_to_string(&o.log)
+            .unwrap_or_default()
+            .contains("No good initial image pair found")
+    };
+    let mut init_retried = false;
+    if models.is_empty() && opts.retry_init {
+        r.note(
+            "mapper",
+            "no model: retrying once with relaxed initialisation settings".into(),
+        );
+        fresh_dir(&sparse)?;
+        // Later occurrences of an option win in COLMAP's option parser.
+        a.extend(relaxed_init_args(&opts.mapper));
+        out = r.step("mapper", "mapper_relaxed", a)?;
+        models = read_models(&sparse)?;
+        init_retried = true;
     }
-    models.retain(|(m, _)| m.registered() > 0);
     if models.is_empty() {
+        let cause = if no_init(&out) {
+            "COLMAP found no initial image pair"
+        } else {
+            "COLMAP built no model"
+        };
         let mut msg = format!(
-            "COLMAP built no model from {} images: too few static features could be matched; try `--matcher exhaustive`{} (mapper log {})",
+            "{cause} from {} images{}: the frames have too little parallax or too few static features match; use more frames (a higher --fps or --pose-stride 1), more features, `--matcher exhaustive`{} (mapper log {})",
             names.len(),
+            if init_retried {
+                ", also with relaxed initialisation settings"
+            } else {
+                ""
+            },
             if opts.use_masks {
                 " or `--no-masks`"
             } else {
@@ -487,7 +826,7 @@ pub fn run_colmap(
         a.extend(arg("input_path", path_str(&best_dir)));
         a.extend(arg("output_path", path_str(&und)));
         a.extend(arg("output_type", "COLMAP"));
-        let out = r.step("image_undistorter", a)?;
+        let out = r.step("image_undistorter", "image_undistorter", a)?;
         require_success("image_undistorter", &out)?;
         let masks = opts.use_masks.then_some(paths.masks.as_path());
         crate::undistort::install_undistorted(&und, &best_dir, masks, &paths.undistorted)?;
@@ -513,6 +852,9 @@ pub fn run_colmap(
         model_dir: paths.out.clone(),
         undistorted_dir,
         work_dir: paths.work.clone(),
+        database: decision,
+        features_reused,
+        init_retried,
         timings: r.timings,
         total_seconds: t0.elapsed().as_secs_f64(),
     })

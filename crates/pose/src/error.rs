@@ -29,6 +29,10 @@ pub enum PoseError {
         log: PathBuf,
         tail: String,
     },
+    /// The run was cancelled while `step` ran (its process was killed; the
+    /// database keeps what was done, so a rerun resumes).
+    #[error("colmap {step} cancelled; rerun to resume")]
+    Cancelled { step: String },
     /// COLMAP ran but produced no usable reconstruction.
     #[error("{0}")]
     NoModel(String),

@@ -12,10 +12,15 @@ pub mod gt_masks;
 pub mod metrics;
 pub mod model_info;
 pub mod process;
+pub mod progress;
+pub mod resume;
 pub mod trajectory;
 pub mod undistort;
 
-pub use colmap_runner::{ColmapOptions, ColmapPaths, ColmapReport, Matcher, Progress, run_colmap};
+pub use colmap_runner::{
+    ColmapOptions, ColmapPaths, ColmapReport, MapperOptions, Matcher, Progress, run_colmap,
+    run_colmap_cancellable,
+};
 pub use error::{PoseError, Result};
 pub use metrics::{
     Alignment, ErrorStats, NamedPose, PoseMetrics, PoseMetricsOptions, Sim3, evaluate, umeyama,

@@ -7,6 +7,7 @@ use crate::error::{PoseError, Result};
 use std::io::{BufRead, BufReader, Read, Write};
 use std::path::{Path, PathBuf};
 use std::process::{Command, Stdio};
+use std::sync::atomic::{AtomicBool, Ordering};
 use std::sync::{Arc, Mutex};
 use std::time::Instant;
 
@@ -59,26 +60,29 @@ pub fn log_tail(log: &Path, n: usize) -> String {
     lines[start..].join(" | ")
 }
 
-/// True for COLMAP output lines worth showing as progress.
-fn is_progress_line(line: &str) -> bool {
-    let l = line.trim_start();
-    l.starts_with("Processed file [")
-        || l.starts_with("Matching block [")
-        || l.starts_with("Matching image [")
-        || l.starts_with("Registering image #")
-        || l.starts_with("Undistorting image [")
-}
-
-/// Run `colmap <step> <args>`, logging to `log`. `on_line` receives progress
-/// lines. Returns the outcome; a non-zero exit is *not* an error here (the
-/// caller decides, e.g. the mapper's "no model" case), but a process that
-/// cannot be started is.
+/// Run `colmap <step> <args>`, logging to `log`. `on_line` receives every
+/// stdout line (trimmed). Returns the outcome; a non-zero exit is *not* an
+/// error here (the caller decides, e.g. the mapper's "no model" case), but a
+/// process that cannot be started is.
 pub fn run_step(
     colmap: &Path,
     step: &str,
     args: &[String],
     log: &Path,
     on_line: &mut dyn FnMut(&str),
+) -> Result<StepOutcome> {
+    run_step_cancellable(colmap, step, args, log, on_line, &AtomicBool::new(false))
+}
+
+/// [`run_step`] that kills the process (and returns [`PoseError::Cancelled`])
+/// once `cancel` is set.
+pub fn run_step_cancellable(
+    colmap: &Path,
+    step: &str,
+    args: &[String],
+    log: &Path,
+    on_line: &mut dyn FnMut(&str),
+    cancel: &AtomicBool,
 ) -> Result<StepOutcome> {
     let file = std::fs::File::create(log).map_err(|e| PoseError::io(log, e))?;
     let sink = Arc::new(Mutex::new(file));
@@ -111,25 +115,59 @@ pub fn run_step(
             }
         })
     });
-    if let Some(stdout) = child.stdout.take() {
-        for line in BufReader::new(stdout).lines() {
-            let Ok(line) = line else { break };
-            if let Ok(mut f) = sink.lock() {
-                let _ = writeln!(f, "{line}");
-            }
-            if is_progress_line(&line) {
+    let stdout = child.stdout.take();
+    let child = Arc::new(Mutex::new(child));
+    let done = Arc::new(AtomicBool::new(false));
+    let cancelled = Arc::new(AtomicBool::new(false));
+    // The watcher kills the process when `cancel` is set; it polls because
+    // the reading below blocks. `cancel` is borrowed, so the watcher runs in
+    // a scope.
+    let status = std::thread::scope(|scope| {
+        let watcher = {
+            let child = Arc::clone(&child);
+            let done = Arc::clone(&done);
+            let cancelled = Arc::clone(&cancelled);
+            scope.spawn(move || {
+                while !done.load(Ordering::Relaxed) {
+                    if cancel.load(Ordering::Relaxed) {
+                        if let Ok(mut c) = child.lock() {
+                            let _ = c.kill();
+                        }
+                        cancelled.store(true, Ordering::Relaxed);
+                        break;
+                    }
+                    std::thread::sleep(std::time::Duration::from_millis(50));
+                }
+            })
+        };
+        if let Some(stdout) = stdout {
+            for line in BufReader::new(stdout).lines() {
+                let Ok(line) = line else { break };
+                if let Ok(mut f) = sink.lock() {
+                    let _ = writeln!(f, "{line}");
+                }
                 on_line(line.trim());
             }
         }
-    }
-    if let Some(t) = err_thread {
-        let _ = t.join();
-    }
-    let status = child.wait().map_err(|e| PoseError::io(log, e))?;
+        if let Some(t) = err_thread {
+            let _ = t.join();
+        }
+        done.store(true, Ordering::Relaxed);
+        let _ = watcher.join();
+        let mut c = child
+            .lock()
+            .map_err(|_| PoseError::Invalid(format!("colmap {step}: process handle poisoned")))?;
+        c.wait().map_err(|e| PoseError::io(log, e))
+    })?;
     let seconds = start.elapsed().as_secs_f64();
     if let Ok(mut f) = sink.lock() {
         let _ = writeln!(f, "# {status} after {seconds:.2} s");
         let _ = f.flush();
+    }
+    if cancelled.load(Ordering::Relaxed) {
+        return Err(PoseError::Cancelled {
+            step: step.to_string(),
+        });
     }
     Ok(StepOutcome {
         seconds,
@@ -181,11 +219,36 @@ mod tests {
         .unwrap();
         assert!(!out.success);
         assert_eq!(lines, vec!["Processed file [1/2]"]);
+        assert!(
+            std::fs::read_to_string(&log)
+                .unwrap()
+                .contains("boom-cause")
+        );
         let e = require_success("feature_extractor", &out)
             .unwrap_err()
             .to_string();
         assert!(e.contains("feature_extractor") && e.contains('3'), "{e}");
         assert!(e.contains("boom-cause"), "{e}");
         assert!(e.contains("x.log"), "{e}");
+    }
+
+    #[test]
+    fn cancel_kills_the_step() {
+        let dir = tempfile::tempdir().unwrap();
+        let log = dir.path().join("y.log");
+        let cancel = AtomicBool::new(false);
+        let t = Instant::now();
+        let e = run_step_cancellable(
+            Path::new("sh"),
+            "-c",
+            &["echo 'Matching image [1/9]'; exec sleep 30".to_string()],
+            &log,
+            &mut |_| cancel.store(true, Ordering::Relaxed),
+            &cancel,
+        )
+        .unwrap_err();
+        assert!(matches!(e, PoseError::Cancelled { .. }), "{e}");
+        assert!(t.elapsed().as_secs_f64() < 10.0);
+        assert!(!std::fs::read_to_string(&log).unwrap().contains("never"));
     }
 }

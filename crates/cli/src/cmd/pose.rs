@@ -3,17 +3,98 @@
 
 use crate::Ctx;
 use anyhow::Context;
-use pose::colmap_runner::{ColmapOptions, ColmapPaths, Matcher, Progress, run_colmap};
+use pose::colmap_runner::{
+    ColmapOptions, ColmapPaths, MapperOptions, Matcher, Progress, run_colmap,
+};
 use pose::metrics::{PoseMetricsOptions, evaluate};
 use std::path::PathBuf;
 
 /// Matcher choice on the command line.
-#[derive(Debug, Clone, Copy, clap::ValueEnum)]
+#[derive(Debug, Clone, Copy, PartialEq, Eq, clap::ValueEnum)]
 pub enum MatcherArg {
-    /// Videos: each frame against the next `--overlap` frames.
+    /// Videos: each frame against the next `--pose-overlap` frames.
     Sequential,
     /// Photo collections: every pair.
     Exhaustive,
+}
+
+/// Mapper settings on the command line.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, clap::ValueEnum)]
+pub enum MapperPreset {
+    /// COLMAP's own defaults.
+    Colmap,
+    /// COLMAP's video preset with its low-quality bundle-adjustment bounds
+    /// (`automatic_reconstructor --data_type video --quality low`).
+    Video,
+}
+
+/// COLMAP options shared by `pose`, `run` and `demo`. Each is optional:
+/// unset keeps the command's default (in `run`: the plan's choice).
+#[derive(Debug, Clone, Default, clap::Args)]
+pub struct PoseOpts {
+    /// COLMAP pair selection.
+    #[arg(long, value_enum)]
+    pub matcher: Option<MatcherArg>,
+    /// COLMAP camera model (SIMPLE_RADIAL, OPENCV, PINHOLE, RADIAL, ...).
+    #[arg(long)]
+    pub camera_model: Option<String>,
+    /// Most SIFT features per image [pose default: 8192].
+    #[arg(long)]
+    pub pose_features: Option<u32>,
+    /// Sequential matching: frames matched after each frame [pose default: 10].
+    #[arg(long, alias = "overlap")]
+    pub pose_overlap: Option<u32>,
+    /// Longest image side used for SIFT, pixels [pose default: 3200].
+    #[arg(long, alias = "max-image-size")]
+    pub pose_max_image_size: Option<u32>,
+    /// Give COLMAP every Nth frame [pose default: 1].
+    #[arg(long)]
+    pub pose_stride: Option<usize>,
+    /// Mapper settings [pose default: colmap].
+    #[arg(long, value_enum)]
+    pub mapper_preset: Option<MapperPreset>,
+    /// The colmap executable [default: colmap on PATH].
+    #[arg(long)]
+    pub colmap: Option<PathBuf>,
+}
+
+impl PoseOpts {
+    /// Apply the options that were given onto `base`.
+    pub fn apply(&self, base: &mut ColmapOptions) -> anyhow::Result<()> {
+        if let Some(m) = self.matcher {
+            base.matcher = match m {
+                MatcherArg::Sequential => Matcher::Sequential,
+                MatcherArg::Exhaustive => Matcher::Exhaustive,
+            };
+        }
+        if let Some(name) = &self.camera_model {
+            base.camera_model = loader::CameraModel::from_name(name)
+                .ok_or_else(|| anyhow::anyhow!("unknown COLMAP camera model `{name}`"))?;
+        }
+        if let Some(v) = self.pose_features {
+            base.max_num_features = v;
+        }
+        if let Some(v) = self.pose_overlap {
+            base.overlap = v;
+        }
+        if let Some(v) = self.pose_max_image_size {
+            base.max_image_size = v;
+        }
+        if let Some(v) = self.pose_stride {
+            base.stride = v;
+        }
+        if let Some(p) = self.mapper_preset {
+            base.mapper = match p {
+                MapperPreset::Colmap => MapperOptions::default(),
+                MapperPreset::Video => MapperOptions::video(),
+            };
+        }
+        if let Some(c) = &self.colmap {
+            base.colmap = c.clone();
+        }
+        base.validate()?;
+        Ok(())
+    }
 }
 
 /// `romosplat pose ...`
@@ -35,21 +116,11 @@ pub struct Args {
     /// Images folder; default `scene/images`.
     #[arg(long)]
     pub images: Option<PathBuf>,
-    /// Pair selection.
-    #[arg(long, value_enum, default_value = "sequential")]
-    pub matcher: MatcherArg,
-    /// COLMAP camera model (SIMPLE_RADIAL, OPENCV, PINHOLE, RADIAL, ...).
-    #[arg(long, default_value = "SIMPLE_RADIAL")]
-    pub camera_model: String,
+    #[command(flatten)]
+    pub colmap_opts: PoseOpts,
     /// One camera per image instead of one shared camera (photo collections).
     #[arg(long)]
     pub per_image_cameras: bool,
-    /// Sequential matching overlap, frames.
-    #[arg(long, default_value_t = 10)]
-    pub overlap: u32,
-    /// Longest image side used for SIFT, pixels.
-    #[arg(long, default_value_t = 3200)]
-    pub max_image_size: u32,
     /// COLMAP threads (-1 = all cores).
     #[arg(long, default_value_t = -1, allow_hyphen_values = true)]
     pub threads: i32,
@@ -63,6 +134,7 @@ pub struct Args {
     #[arg(long)]
     pub out: Option<PathBuf>,
     /// Work folder (database, raw models, COLMAP logs); default `scene/colmap`.
+    /// The database is kept and reused by a rerun on the same inputs.
     #[arg(long)]
     pub work: Option<PathBuf>,
     /// Undistorted copy folder; default `scene/undistorted`.
@@ -72,15 +144,10 @@ pub struct Args {
     /// transforms.json; read before the run, so `scene/sparse/0` works).
     #[arg(long)]
     pub gt: Option<PathBuf>,
-    /// The colmap executable.
-    #[arg(long, default_value = "colmap")]
-    pub colmap: PathBuf,
 }
 
 /// Run `romosplat pose`.
 pub fn run(args: &Args, ctx: &Ctx) -> anyhow::Result<serde_json::Value> {
-    let camera_model = loader::CameraModel::from_name(&args.camera_model)
-        .ok_or_else(|| anyhow::anyhow!("unknown COLMAP camera model `{}`", args.camera_model))?;
     let mut paths = ColmapPaths::for_scene(&args.scene);
     if let Some(p) = &args.images {
         paths.images = p.clone();
@@ -97,23 +164,15 @@ pub fn run(args: &Args, ctx: &Ctx) -> anyhow::Result<serde_json::Value> {
     if let Some(p) = &args.undistorted {
         paths.undistorted = p.clone();
     }
-    let opts = ColmapOptions {
-        colmap: args.colmap.clone(),
-        matcher: match args.matcher {
-            MatcherArg::Sequential => Matcher::Sequential,
-            MatcherArg::Exhaustive => Matcher::Exhaustive,
-        },
-        camera_model,
+    let mut opts = ColmapOptions {
         single_camera: !args.per_image_cameras,
         use_masks: !args.no_masks,
-        overlap: args.overlap,
-        max_image_size: args.max_image_size,
         threads: args.threads,
         seed: args.seed,
         undistort: !args.no_undistort,
         ..ColmapOptions::default()
     };
-    opts.validate()?;
+    args.colmap_opts.apply(&mut opts)?;
     let gt = match &args.gt {
         Some(p) => Some(pose::trajectory::load_trajectory(p)?.0),
         None => None,
@@ -139,7 +198,7 @@ pub fn run(args: &Args, ctx: &Ctx) -> anyhow::Result<serde_json::Value> {
     ctx.info(format!(
         "COLMAP on {} ({}, {}, masks: {})",
         paths.images.display(),
-        args.camera_model,
+        opts.camera_model.name(),
         match opts.matcher {
             Matcher::Sequential => "sequential",
             Matcher::Exhaustive => "exhaustive",
@@ -158,16 +217,16 @@ pub fn run(args: &Args, ctx: &Ctx) -> anyhow::Result<serde_json::Value> {
             pb.set_message(format!("step {}/{of}", index + 1));
             bar = Some(pb);
         }
-        Progress::Line { line, .. } => {
+        Progress::Count { count, .. } => {
             if let Some(pb) = &bar {
-                if let Some((i, n)) = bracket_fraction(&line) {
+                if let Some(n) = count.total {
                     pb.set_length(n);
-                    pb.set_position(i);
-                } else {
-                    pb.set_message(line);
                 }
+                pb.set_position(count.done);
+                pb.set_message(count.unit.name());
             }
         }
+        Progress::Note { step, message } => ctx.info(format!("  {step}: {message}")),
         Progress::Finished { step, seconds } => {
             if let Some(pb) = bar.take() {
                 pb.finish_and_clear();
@@ -186,6 +245,12 @@ pub fn run(args: &Args, ctx: &Ctx) -> anyhow::Result<serde_json::Value> {
         report.total_seconds,
         report.model_dir.display()
     ));
+    if report.features_reused > 0 {
+        ctx.info(format!(
+            "features of {} images reused from the kept database",
+            report.features_reused
+        ));
+    }
     if !report.left_out.is_empty() {
         ctx.info(format!("left out: {}", report.left_out.join(", ")));
     }
@@ -213,11 +278,4 @@ pub fn run(args: &Args, ctx: &Ctx) -> anyhow::Result<serde_json::Value> {
         }
     }
     Ok(value)
-}
-
-/// `[i/n]` in a COLMAP progress line.
-fn bracket_fraction(line: &str) -> Option<(u64, u64)> {
-    let inner = line.split('[').nth(1)?.split(']').next()?;
-    let (i, n) = inner.split_once('/')?;
-    Some((i.trim().parse().ok()?, n.trim().parse().ok()?))
 }
