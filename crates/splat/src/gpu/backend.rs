@@ -53,16 +53,11 @@ struct State {
 pub struct GpuBackend {
     pub ctx: GpuContext,
     fwd: ForwardKernels,
-    bwd: BackwardKernels,
-    adam: Adam,
-    loss: Loss,
-    ssim: Ssim,
+    /// Loss, backward, statistics, regulariser and Adam kernels.
+    k: StepKernels,
     /// Every transient buffer of a step (render, loss, D-SSIM maps, sort and
     /// scan scratch, projected gradients), kept across steps.
     scratch: Scratch,
-    stats_k: DensifyStatsKernel,
-    /// MCMC position noise and regulariser kernels.
-    mcmc: McmcKernels,
     /// MCMC regularisers added in every step.
     reg: Regularization,
     state: Option<State>,
@@ -95,13 +90,15 @@ impl GpuBackend {
         let ctx = GpuContext::new(opts)?;
         Ok(GpuBackend {
             fwd: ForwardKernels::new(&ctx),
-            bwd: BackwardKernels::new(&ctx),
-            adam: Adam::new(&ctx),
-            loss: Loss::new(&ctx),
-            ssim: Ssim::new(&ctx),
+            k: StepKernels {
+                bwd: BackwardKernels::new(&ctx),
+                adam: Adam::new(&ctx),
+                loss: Loss::new(&ctx),
+                ssim: Ssim::new(&ctx),
+                stats: DensifyStatsKernel::new(&ctx),
+                mcmc: McmcKernels::new(&ctx),
+            },
             scratch: Scratch::default(),
-            stats_k: DensifyStatsKernel::new(&ctx),
-            mcmc: McmcKernels::new(&ctx),
             reg: Regularization::default(),
             ctx,
             state: None,
@@ -146,6 +143,277 @@ impl GpuBackend {
 /// Splats → moments container check.
 fn same_shape(a: &Splats, b: &Splats) -> bool {
     a.len() == b.len() && a.sh.len() == b.sh.len()
+}
+
+/// The kernels a training step records after the forward pass.
+struct StepKernels {
+    bwd: BackwardKernels,
+    adam: Adam,
+    loss: Loss,
+    ssim: Ssim,
+    stats: DensifyStatsKernel,
+    /// MCMC position noise and regulariser kernels.
+    mcmc: McmcKernels,
+}
+
+/// The loss of one step on the device: dL/d image and the partial sums the
+/// host reads back for the loss value.
+struct LossOutputs {
+    v_image: wgpu::Buffer,
+    /// (Σ m|d|, Σ m d²) per block of pixels.
+    partials: wgpu::Buffer,
+    /// Σ g·S per block (mean SSIM); written only when `lambda > 0`.
+    ssim_partials: wgpu::Buffer,
+    blocks: usize,
+    /// 1 / (3 · kept pixels), 0 when nothing is kept.
+    norm: f64,
+    /// D-SSIM weight λ.
+    lambda: f64,
+}
+
+impl StepKernels {
+    /// Masked L1 gradient and, with λ > 0, the D-SSIM term added to it.
+    fn record_loss(
+        &self,
+        ctx: &GpuContext,
+        rec: &mut Recorder,
+        image: &wgpu::Buffer,
+        view: &ViewCache,
+        cam: &RenderCamera,
+        input: &StepInput<'_>,
+    ) -> std::result::Result<LossOutputs, GpuError> {
+        let pixels = cam.width * cam.height;
+        let v_image = rec.storage("v_image", pixels as u64 * 12);
+        let lambda = input.loss.ssim_weight as f64;
+        let partials = rec.storage("loss_partials", blocks(pixels) as u64 * 8);
+        let scale = if view.kept > 0.0 {
+            (1.0 - lambda) / (3.0 * view.kept)
+        } else {
+            0.0
+        };
+        let norm = if view.kept > 0.0 {
+            1.0 / (3.0 * view.kept)
+        } else {
+            0.0
+        };
+        let mask_buf = view.mask.as_ref().unwrap_or(&view.target);
+        self.loss.dispatch(
+            ctx,
+            rec,
+            &LossArgs {
+                image,
+                target: &view.target,
+                mask: mask_buf,
+                v_image: &v_image,
+                partials: &partials,
+                uniforms: LossUniforms {
+                    n_pixels: pixels,
+                    has_mask: view.mask.is_some() as u32,
+                    pad: [0; 2],
+                    scale: scale as f32,
+                    pad2: [0.0; 3],
+                },
+            },
+        )?;
+        let ssim_partials = rec.storage("ssim_partials", blocks(pixels) as u64 * 4);
+        if lambda > 0.0 {
+            // D-SSIM on the device, added to the L1 gradient in v_image.
+            let need = super::ssim::SCRATCH_MAPS * pixels as u64 * 4;
+            let s0 = rec.storage("ssim_scratch0", need);
+            let s1 = rec.storage("ssim_scratch1", need);
+            self.ssim.dispatch(
+                ctx,
+                rec,
+                &SsimArgs {
+                    image,
+                    target: &view.target,
+                    mask: mask_buf,
+                    has_mask: view.mask.is_some(),
+                    v_image: &v_image,
+                    partials: &ssim_partials,
+                    scratch: [&s0, &s1],
+                    width: cam.width,
+                    height: cam.height,
+                    norm: norm as f32,
+                    lambda: lambda as f32,
+                },
+            )?;
+        }
+        Ok(LossOutputs {
+            v_image,
+            partials,
+            ssim_partials,
+            blocks: blocks(pixels) as usize,
+            norm,
+            lambda,
+        })
+    }
+
+    /// Backward of the render into `st.grads`, densification statistics,
+    /// and the MCMC regulariser gradients (nothing when `reg` is zero).
+    fn record_backward(
+        &self,
+        ctx: &GpuContext,
+        rec: &mut Recorder,
+        st: &State,
+        fs: &super::forward::ForwardState,
+        v_image: &wgpu::Buffer,
+        reg: &Regularization,
+    ) -> std::result::Result<(), GpuError> {
+        let v_proj = rec.storage("v_proj", st.params.n as u64 * GRAD_STRIDE * 4);
+        record_backward(
+            ctx,
+            &self.bwd,
+            rec,
+            &BackwardArgs {
+                params: &st.params,
+                state: fs,
+                v_image,
+                v_proj: &v_proj,
+                grads: &st.grads,
+            },
+        )?;
+        self.stats.dispatch(
+            ctx,
+            rec,
+            &StatsArgs {
+                cam: &fs.cam,
+                projected: &fs.projected,
+                v_proj: &v_proj,
+                stats: &st.stats,
+                n: st.params.n,
+            },
+        )?;
+        self.mcmc.record_reg(ctx, rec, &st.params, &st.grads, reg)
+    }
+
+    /// Adam on every parameter group (dense, as torch, unless `sparse`:
+    /// then only splats visible in `projected`).
+    #[allow(clippy::too_many_arguments)]
+    fn record_adam(
+        &self,
+        ctx: &GpuContext,
+        rec: &mut Recorder,
+        st: &State,
+        projected: &wgpu::Buffer,
+        lr: &crate::backend::LearningRates,
+        base: AdamUniforms,
+        sparse: bool,
+    ) -> std::result::Result<(), GpuError> {
+        let n = st.params.n;
+        let k3 = crate::types::sh_coeffs(st.params.sh_degree) as u32 * 3;
+        let groups = [
+            (
+                &st.params.means,
+                &st.grads.means,
+                &st.m.means,
+                &st.v.means,
+                3 * n,
+                lr.means,
+                lr.means,
+                0,
+            ),
+            (
+                &st.params.log_scales,
+                &st.grads.log_scales,
+                &st.m.log_scales,
+                &st.v.log_scales,
+                3 * n,
+                lr.scales,
+                lr.scales,
+                0,
+            ),
+            (
+                &st.params.rotations,
+                &st.grads.rotations,
+                &st.m.rotations,
+                &st.v.rotations,
+                4 * n,
+                lr.rotations,
+                lr.rotations,
+                0,
+            ),
+            (
+                &st.params.opacity_logits,
+                &st.grads.opacity_logits,
+                &st.m.opacity_logits,
+                &st.v.opacity_logits,
+                n,
+                lr.opacity,
+                lr.opacity,
+                0,
+            ),
+            (
+                &st.params.sh,
+                &st.grads.sh,
+                &st.m.sh,
+                &st.v.sh,
+                k3 * n,
+                lr.sh_rest,
+                lr.sh_dc,
+                k3,
+            ),
+        ];
+        for (p, g, m, v, count, lr_rest, lr_head, stride) in groups {
+            let width = count.checked_div(n).unwrap_or(0);
+            let uniforms = AdamUniforms {
+                n: count,
+                stride,
+                head: 3,
+                sparse_width: if sparse { width } else { 0 },
+                lr: lr_rest,
+                lr_head,
+                ..base
+            };
+            self.adam.dispatch(
+                ctx,
+                rec,
+                &AdamArgs {
+                    params: p,
+                    grads: g,
+                    exp_avg: m,
+                    exp_avg_sq: v,
+                    visible: projected,
+                    uniforms,
+                },
+            )?;
+        }
+        Ok(())
+    }
+}
+
+/// The step's loss value, PSNR and visible count, read back after the submit.
+fn read_step_stats(
+    ctx: &GpuContext,
+    loss: &LossOutputs,
+    kept: f64,
+    visible: &wgpu::Buffer,
+) -> std::result::Result<StepStats, GpuError> {
+    let parts: Vec<f32> = ctx.read(&loss.partials, loss.blocks * 2)?;
+    let sums = parts.chunks_exact(2).fold((0.0f64, 0.0f64), |a, c| {
+        (a.0 + c[0] as f64, a.1 + c[1] as f64)
+    });
+    let l1 = sums.0 * loss.norm;
+    let mse = sums.1 * loss.norm;
+    let lambda = loss.lambda;
+    let mut ssim = 1.0f64;
+    if lambda > 0.0 {
+        let p: Vec<f32> = ctx.read(&loss.ssim_partials, loss.blocks)?;
+        ssim = p.iter().map(|&v| v as f64).sum();
+    }
+    let value = if kept > 0.0 {
+        (1.0 - lambda) * l1 + lambda * (1.0 - ssim)
+    } else {
+        0.0
+    };
+    let visible: u32 = ctx.read::<u32>(visible, 1)?[0];
+    Ok(StepStats {
+        loss: value as f32,
+        l1: l1 as f32,
+        ssim: ssim as f32,
+        psnr: (10.0 * (1.0 / mse.max(1e-20)).log10()) as f32,
+        visible,
+    })
 }
 
 impl TrainBackend for GpuBackend {
@@ -221,173 +489,22 @@ impl TrainBackend for GpuBackend {
                 profile: self.profile,
             },
         )?;
-        let pixels = cam.width * cam.height;
-        let v_image = rec.storage("v_image", pixels as u64 * 12);
-        let lambda = input.loss.ssim_weight as f64;
-        let partials = rec.storage("loss_partials", blocks(pixels) as u64 * 8);
-        let scale = if view.kept > 0.0 {
-            (1.0 - lambda) / (3.0 * view.kept)
-        } else {
-            0.0
-        };
-        let norm = if view.kept > 0.0 {
-            1.0 / (3.0 * view.kept)
-        } else {
-            0.0
-        };
-        let mask_buf = view.mask.as_ref().unwrap_or(&view.target);
-        self.loss.dispatch(
-            ctx,
-            &mut rec,
-            &LossArgs {
-                image: &fs.image,
-                target: &view.target,
-                mask: mask_buf,
-                v_image: &v_image,
-                partials: &partials,
-                uniforms: LossUniforms {
-                    n_pixels: pixels,
-                    has_mask: view.mask.is_some() as u32,
-                    pad: [0; 2],
-                    scale: scale as f32,
-                    pad2: [0.0; 3],
-                },
-            },
-        )?;
-        let ssim_partials = rec.storage("ssim_partials", blocks(pixels) as u64 * 4);
-        if lambda > 0.0 {
-            // D-SSIM on the device, added to the L1 gradient in v_image.
-            let need = super::ssim::SCRATCH_MAPS * pixels as u64 * 4;
-            let s0 = rec.storage("ssim_scratch0", need);
-            let s1 = rec.storage("ssim_scratch1", need);
-            self.ssim.dispatch(
-                ctx,
-                &mut rec,
-                &SsimArgs {
-                    image: &fs.image,
-                    target: &view.target,
-                    mask: mask_buf,
-                    has_mask: view.mask.is_some(),
-                    v_image: &v_image,
-                    partials: &ssim_partials,
-                    scratch: [&s0, &s1],
-                    width: cam.width,
-                    height: cam.height,
-                    norm: norm as f32,
-                    lambda: lambda as f32,
-                },
-            )?;
-        }
-        let v_proj = rec.storage("v_proj", st.params.n as u64 * GRAD_STRIDE * 4);
-        record_backward(
-            ctx,
-            &self.bwd,
-            &mut rec,
-            &BackwardArgs {
-                params: &st.params,
-                state: &fs,
-                v_image: &v_image,
-                v_proj: &v_proj,
-                grads: &st.grads,
-            },
-        )?;
-        self.stats_k.dispatch(
-            ctx,
-            &mut rec,
-            &StatsArgs {
-                cam: &fs.cam,
-                projected: &fs.projected,
-                v_proj: &v_proj,
-                stats: &st.stats,
-                n: st.params.n,
-            },
-        )?;
-        // MCMC regularisers' gradients (nothing recorded when zero).
-        self.mcmc
-            .record_reg(ctx, &mut rec, &st.params, &st.grads, &self.reg)?;
-        // Adam, every group (dense, as torch, unless `sparse_adam`).
+        let loss = self
+            .k
+            .record_loss(ctx, &mut rec, &fs.image, view, cam, input)?;
+        self.k
+            .record_backward(ctx, &mut rec, st, &fs, &loss.v_image, &self.reg)?;
         st.step += 1;
-        let t = st.step.min(i32::MAX as u64) as i32;
-        let base = AdamUniforms::for_step(&self.adam_config, t);
-        let n = st.params.n;
-        let k3 = crate::types::sh_coeffs(st.params.sh_degree) as u32 * 3;
-        let lr = &input.lr;
-        let groups = [
-            (
-                &st.params.means,
-                &st.grads.means,
-                &st.m.means,
-                &st.v.means,
-                3 * n,
-                lr.means,
-                lr.means,
-                0,
-            ),
-            (
-                &st.params.log_scales,
-                &st.grads.log_scales,
-                &st.m.log_scales,
-                &st.v.log_scales,
-                3 * n,
-                lr.scales,
-                lr.scales,
-                0,
-            ),
-            (
-                &st.params.rotations,
-                &st.grads.rotations,
-                &st.m.rotations,
-                &st.v.rotations,
-                4 * n,
-                lr.rotations,
-                lr.rotations,
-                0,
-            ),
-            (
-                &st.params.opacity_logits,
-                &st.grads.opacity_logits,
-                &st.m.opacity_logits,
-                &st.v.opacity_logits,
-                n,
-                lr.opacity,
-                lr.opacity,
-                0,
-            ),
-            (
-                &st.params.sh,
-                &st.grads.sh,
-                &st.m.sh,
-                &st.v.sh,
-                k3 * n,
-                lr.sh_rest,
-                lr.sh_dc,
-                k3,
-            ),
-        ];
-        for (p, g, m, v, count, lr_rest, lr_head, stride) in groups {
-            let width = count.checked_div(n).unwrap_or(0);
-            let uniforms = AdamUniforms {
-                n: count,
-                stride,
-                head: 3,
-                sparse_width: if self.sparse_adam { width } else { 0 },
-                lr: lr_rest,
-                lr_head,
-                ..base
-            };
-            self.adam.dispatch(
-                ctx,
-                &mut rec,
-                &AdamArgs {
-                    params: p,
-                    grads: g,
-                    exp_avg: m,
-                    exp_avg_sq: v,
-                    visible: &fs.projected,
-                    uniforms,
-                },
-            )?;
-        }
+        let base = AdamUniforms::for_step(&self.adam_config, st.step.min(i32::MAX as u64) as i32);
+        self.k.record_adam(
+            ctx,
+            &mut rec,
+            st,
+            &fs.projected,
+            &input.lr,
+            base,
+            self.sparse_adam,
+        )?;
         let t_sub = std::time::Instant::now();
         timings.extend(rec.finish()?);
         timings.push(("host:step_submit_wait", t_sub.elapsed().as_secs_f64() * 1e3));
@@ -396,33 +513,11 @@ impl TrainBackend for GpuBackend {
             (self.scratch.allocations - allocs_before) as f64,
         ));
         let t_stats = std::time::Instant::now();
-        let parts: Vec<f32> = ctx.read(&partials, blocks(pixels) as usize * 2)?;
-        let sums = parts.chunks_exact(2).fold((0.0f64, 0.0f64), |a, c| {
-            (a.0 + c[0] as f64, a.1 + c[1] as f64)
-        });
-        let l1 = sums.0 * norm;
-        let mse = sums.1 * norm;
-        let mut ssim = 1.0f64;
-        if lambda > 0.0 {
-            let p: Vec<f32> = ctx.read(&ssim_partials, blocks(pixels) as usize)?;
-            ssim = p.iter().map(|&v| v as f64).sum();
-        }
-        let loss = if view.kept > 0.0 {
-            (1.0 - lambda) * l1 + lambda * (1.0 - ssim)
-        } else {
-            0.0
-        };
-        let visible: u32 = ctx.read::<u32>(&st.stats.visible, 1)?[0];
+        let stats = read_step_stats(ctx, &loss, view.kept, &st.stats.visible)?;
         timings.push(("host:stats_readback", t_stats.elapsed().as_secs_f64() * 1e3));
         self.timings = timings;
         self.intersections = fs.intersections;
-        Ok(StepStats {
-            loss: loss as f32,
-            l1: l1 as f32,
-            ssim: ssim as f32,
-            psnr: (10.0 * (1.0 / mse.max(1e-20)).log10()) as f32,
-            visible,
-        })
+        Ok(stats)
     }
 
     fn set_regularization(&mut self, reg: Regularization) -> Result<()> {
@@ -435,7 +530,8 @@ impl TrainBackend for GpuBackend {
             return Err(SplatError::Invalid("perturb_means before upload".into()));
         };
         let mut rec = Recorder::new(&self.ctx, false);
-        self.mcmc
+        self.k
+            .mcmc
             .record_noise(&self.ctx, &mut rec, &st.params, noise)?;
         rec.finish()?;
         Ok(())
