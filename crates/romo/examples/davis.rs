@@ -1,13 +1,15 @@
 //! Measurement (not a test): RoMo on the DAVIS-2016 sequences in
-//! `$DAVIS_DIR` (default /work/shared/data/davis2016), masks into
+//! `$DAVIS_DIR` (required), masks into
 //! `$OUT` (default /tmp/romo_davis), J / precision / recall per sequence as
 //! JSON. Options may be overridden with a partial JSON `RomoOptions` in
 //! `$ROMO_OPTS`; `$SEQS` restricts to a comma-separated list.
 #![allow(clippy::unwrap_used, clippy::expect_used)]
 use std::path::PathBuf;
 fn main() {
-    let davis =
-        PathBuf::from(std::env::var("DAVIS_DIR").unwrap_or("/work/shared/data/davis2016".into()));
+    let Some(davis) = std::env::var_os("DAVIS_DIR").map(PathBuf::from) else {
+        eprintln!("set DAVIS_DIR to the DAVIS-2016 folder (JPEGImages/480p, Annotations/480p)");
+        std::process::exit(2);
+    };
     let out = PathBuf::from(std::env::var("OUT").unwrap_or("/tmp/romo_davis".into()));
     let opts: romo::RomoOptions =
         serde_json::from_str(&std::env::var("ROMO_OPTS").unwrap_or("{}".into())).unwrap();

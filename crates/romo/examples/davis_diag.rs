@@ -52,8 +52,10 @@ impl Counts {
 }
 
 fn main() {
-    let davis =
-        PathBuf::from(std::env::var("DAVIS_DIR").unwrap_or("/work/shared/data/davis2016".into()));
+    let Some(davis) = std::env::var_os("DAVIS_DIR").map(PathBuf::from) else {
+        eprintln!("set DAVIS_DIR to the DAVIS-2016 folder (JPEGImages/480p, Annotations/480p)");
+        std::process::exit(2);
+    };
     let opts: romo::RomoOptions =
         serde_json::from_str(&std::env::var("ROMO_OPTS").unwrap_or("{}".into())).unwrap();
     let only: Option<Vec<String>> = std::env::var("SEQS")

@@ -48,8 +48,8 @@ pub struct LabelOptions {
     /// 0.345, 0.15 → 0.368, 0.3 → 0.374; L stays ≥ 99% static and covers
     /// 60–95% of the background at 0.15. On the demo scene (pedestrians
     /// moving along epipolar lines) 0.3 puts L on them (J 0.23 vs 0.61),
-    /// hence 0.15 until session 6. With the session-6 defaults
-    /// (inlier-ratio selection, cheirality and three-view tests): DAVIS
+    /// so not 0.3. With inlier-ratio selection and the cheirality and
+    /// three-view tests: DAVIS
     /// mean J 0.15 → 0.629, 0.12 → 0.638, 0.1 → 0.639, 0.08 → 0.595 (parkour
     /// 0.82 → 0.56), 0.05 → 0.569; demo scene (seeds 0 / 1 / 2) 0.15 →
     /// 0.767 mean, 0.12 → 0.773, 0.1 → 0.784, 0.08 → 0.785; small test scene

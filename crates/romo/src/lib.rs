@@ -3,7 +3,7 @@
 //! dependency-free backends for every stage and optional neural ones through
 //! ONNX Runtime (feature `onnx`).
 //!
-//! Stages (DESIGN.md, "The paper it implements"): [`flow`] → cycle check →
+//! Stages (`docs/design.md`, "The pipeline"): [`flow`] → cycle check →
 //! robust epipolar [`geometry`] → Sampson-based U/L labels → per-pixel
 //! features → a tiny MLP → refinement to full resolution → masks.
 

@@ -1,4 +1,4 @@
-//! The RoMo pipeline on a sequence of frames (DESIGN.md, steps 1–6), on a
+//! The RoMo pipeline on a sequence of frames (`docs/design.md`, "The pipeline"), on a
 //! low-resolution working grid; [`crate::scene`] adds file I/O and
 //! full-resolution refinement.
 //!

@@ -203,32 +203,6 @@ impl Plane {
         (Plane { w, h, data: gx }, Plane { w, h, data: gy })
     }
 
-    /// Bilinear sample of several planes of equal size at one point.
-    #[inline]
-    pub fn bilinear_many<const N: usize>(planes: [&Plane; N], x: f32, y: f32) -> [f32; N] {
-        let p = planes[0];
-        let x = x.clamp(0.0, (p.w - 1) as f32);
-        let y = y.clamp(0.0, (p.h - 1) as f32);
-        let (x0, y0) = (x.floor(), y.floor());
-        let (fx, fy) = (x - x0, y - y0);
-        let (x0, y0) = (x0 as usize, y0 as usize);
-        let x1 = (x0 + 1).min(p.w - 1);
-        let y1 = (y0 + 1).min(p.h - 1);
-        let (i00, i10, i01, i11) = (y0 * p.w + x0, y0 * p.w + x1, y1 * p.w + x0, y1 * p.w + x1);
-        let (w00, w10, w01, w11) = (
-            (1.0 - fx) * (1.0 - fy),
-            fx * (1.0 - fy),
-            (1.0 - fx) * fy,
-            fx * fy,
-        );
-        let mut out = [0.0; N];
-        for (o, q) in out.iter_mut().zip(planes) {
-            let d = &q.data;
-            *o = w00 * d[i00] + w10 * d[i10] + w01 * d[i01] + w11 * d[i11];
-        }
-        out
-    }
-
     /// Element-wise map.
     pub fn map(&self, f: impl Fn(f32) -> f32 + Sync) -> Plane {
         Plane {

@@ -26,9 +26,9 @@ pub struct RefineOptions {
     /// Guide the filter with the frame's colour (He et al.'s colour guided
     /// filter: per window a 3 × 3 covariance, so an edge between two
     /// colours of equal luma still guides) instead of its luma (default
-    /// true since session 7: demo scene J, seeds 0 / 1 / 2, 0.838 / 0.813 /
-    /// 0.820 → 0.858 / 0.834 / 0.841; DAVIS 0.648 / 0.653 / 0.673 → 0.650 /
-    /// 0.657 / 0.676).
+    /// true: demo scene J, seeds 0 / 1 / 2, luma 0.838 / 0.813 / 0.820,
+    /// colour 0.858 / 0.834 / 0.841; DAVIS luma 0.648 / 0.653 / 0.673,
+    /// colour 0.650 / 0.657 / 0.676).
     pub colour_guide: bool,
     /// Probability above which a pixel is moving (paper: 0.5).
     pub threshold: f32,

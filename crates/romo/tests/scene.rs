@@ -74,13 +74,12 @@ fn small_scene_masks_match_ground_truth_motion() {
     // the three-view test too (default on): J 0.590, P 0.87, R 0.56 (this
     // scene is seed-sensitive: seeds 1 / 2 give 0.602 / 0.492 with it,
     // 0.554 / 0.544 without; seed 0 is deterministic run to run).
-    // With L < 0.1·v (session 6; was 0.15·v) and the inlier-ratio model
-    // selection: J 0.672, P 0.85, R 0.76 over the 24 video frames (seed 0;
-    // bit-reproducible, also across thread counts, since training sums in
-    // a fixed order). The numbers above, and 0.718 before session 6's fix,
-    // also counted the 4 held-out views (J 1 each).
-    // Session 7, with the finer flow of `DisOptions::masks` and the static
-    // veto at 0.02·v: J 0.750, P 0.89, R 0.83; with the colour guide too:
+    // With L < 0.1·v and the inlier-ratio model selection: J 0.672, P 0.85,
+    // R 0.76 over the 24 video frames (seed 0; bit-reproducible, also
+    // across thread counts, since training sums in a fixed order); the
+    // numbers above also counted the 4 held-out views (J 1 each). With the
+    // finer flow of `DisOptions::masks` and the static veto at 0.02·v:
+    // J 0.750, P 0.89, R 0.83; with the colour guide too (the defaults):
     // J 0.810, P 0.92, R 0.87.
     // Thresholds a bit below the measurement.
     assert!(m.precision >= 0.85, "precision {}", m.precision);

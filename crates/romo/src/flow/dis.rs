@@ -112,9 +112,9 @@ impl DisOptions {
     /// half-resolution finest level only resolves the grid itself; thin and
     /// repetitively textured movers (the demo's striped and checked
     /// pedestrians) then get flow smoothed into the background, and
-    /// labels and region completion lose them. Measured (session 7): demo
-    /// scene J, seeds 0 / 1 / 2, 0.759 / 0.770 / 0.764 → 0.820 / 0.797 /
-    /// 0.804 (finest level alone: 0.793 for seed 0; stride 1 0.802, patch 6
+    /// labels and region completion lose them. Measured: demo scene J,
+    /// seeds 0 / 1 / 2, with the defaults 0.759 / 0.770 / 0.764, with this
+    /// preset 0.820 / 0.797 / 0.804 (finest level alone: 0.793 for seed 0; stride 1 0.802, patch 6
     /// 0.812, patch 12 0.798, frames at 3× the grid 0.810); DAVIS mean J
     /// 0.639 → 0.652 for seed 0 (camel 0.72 → 0.80, car-roundabout 0.74 →
     /// 0.79; parkour 0.81 → 0.68 for this seed, 0.83 for seeds 1 and 2).

@@ -1,4 +1,4 @@
-//! Stage 1 of RoMo (DESIGN.md, step 1): dense optical flow between frames.
+//! Stage 1 of RoMo (`docs/design.md`, "The pipeline"): dense optical flow between frames.
 //!
 //! [`FlowEstimator`] is the seam: the built-in backend is [`dis::Dis`], a
 //! Rust implementation of Dense Inverse Search (Kroeger et al., ECCV 2016)
