@@ -384,26 +384,9 @@ pub struct ColmapReport {
     pub total_seconds: f64,
 }
 
-const IMAGE_EXTS: [&str; 6] = ["jpg", "jpeg", "png", "tif", "tiff", "bmp"];
-
-/// Image file names in `dir`, sorted (capture order).
-pub fn list_images(dir: &Path) -> Result<Vec<String>> {
-    let rd = std::fs::read_dir(dir).map_err(|e| PoseError::io(dir, e))?;
-    let mut names = Vec::new();
-    for entry in rd {
-        let entry = entry.map_err(|e| PoseError::io(dir, e))?;
-        let name = entry.file_name().to_string_lossy().into_owned();
-        let ext = Path::new(&name)
-            .extension()
-            .map(|e| e.to_string_lossy().to_ascii_lowercase())
-            .unwrap_or_default();
-        if IMAGE_EXTS.contains(&ext.as_str()) && entry.path().is_file() {
-            names.push(name);
-        }
-    }
-    names.sort();
-    Ok(names)
-}
+/// Image file names in `dir`, sorted (capture order): the loader's listing,
+/// so COLMAP sees exactly the frames the other stages see.
+pub use loader::scene::list_images;
 
 /// Every image must have `masks/<name>.png` of the same size.
 fn check_masks(images: &Path, masks: &Path, names: &[String]) -> Result<()> {
@@ -414,7 +397,7 @@ fn check_masks(images: &Path, masks: &Path, names: &[String]) -> Result<()> {
         )));
     }
     for n in names {
-        let m = masks.join(format!("{n}.png"));
+        let m = loader::masks::mask_path(masks, n);
         if !m.is_file() {
             return Err(PoseError::Invalid(format!(
                 "{}: mask missing for image {n} (masks are <image name>.png)",

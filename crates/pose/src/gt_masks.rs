@@ -3,11 +3,12 @@
 //!
 //! `gt_motion/<stem>.png` marks moving pixels with 255; COLMAP's (and our)
 //! `masks/<image name>.png` marks pixels to *keep* with 255. The conversion is
-//! an inversion plus the renaming; images without a ground-truth file (e.g.
+//! an inversion plus the renaming, both `loader::masks`'s; images without a ground-truth file (e.g.
 //! clean held-out views) get an all-keep mask.
 
-use crate::colmap_runner::list_images;
 use crate::error::{PoseError, Result};
+use loader::masks;
+use loader::scene::list_images;
 use std::path::Path;
 
 /// Write `out/<image name>.png` for every image in `images`, from
@@ -18,14 +19,11 @@ pub fn masks_from_gt_motion(images: &Path, gt_motion: &Path, out: &Path) -> Resu
     std::fs::create_dir_all(out).map_err(|e| PoseError::io(out, e))?;
     let mut from_gt = 0;
     for name in &names {
-        let stem = Path::new(name)
-            .file_stem()
-            .map_or_else(|| name.clone(), |s| s.to_string_lossy().into_owned());
         let (w, h) = image::image_dimensions(images.join(name))
             .map_err(|e| PoseError::Invalid(format!("{}: {e}", images.join(name).display())))?;
-        let gt_path = gt_motion.join(format!("{stem}.png"));
-        let mask = if gt_path.is_file() {
-            let gt = loader::io::read_gray8(&gt_path)?;
+        let gt_path = masks::gt_motion_path(gt_motion, name);
+        let keep = if gt_path.is_file() {
+            let gt = masks::read_moving(&gt_path)?;
             if gt.dimensions() != (w, h) {
                 return Err(PoseError::Invalid(format!(
                     "{}: ground-truth motion is {}×{} but its image is {w}×{h}",
@@ -35,17 +33,11 @@ pub fn masks_from_gt_motion(images: &Path, gt_motion: &Path, out: &Path) -> Resu
                 )));
             }
             from_gt += 1;
-            image::GrayImage::from_fn(w, h, |x, y| {
-                image::Luma([if gt.get_pixel(x, y).0[0] >= 128 {
-                    0
-                } else {
-                    255
-                }])
-            })
+            masks::keep_from_moving(&gt)
         } else {
-            image::GrayImage::from_pixel(w, h, image::Luma([255]))
+            image::GrayImage::from_pixel(w, h, image::Luma([masks::KEEP]))
         };
-        loader::io::write_png_gray8(out.join(format!("{name}.png")), &mask)?;
+        masks::write_mask(masks::mask_path(out, name), &keep)?;
     }
     Ok((names.len(), from_gt))
 }
