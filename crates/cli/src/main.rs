@@ -3,7 +3,9 @@
 
 mod cmd;
 mod ctx;
+mod keyframes;
 mod pipeline;
+mod plan;
 mod report;
 
 use clap::Parser;

@@ -10,7 +10,9 @@ pub mod eval_views;
 pub mod export;
 pub mod frames;
 pub mod inspect;
+pub mod keyframes;
 pub mod mask;
+pub mod plan;
 pub mod pose;
 pub mod render;
 pub mod run;
@@ -44,6 +46,10 @@ pub enum Command {
     Export(export::Args),
     /// Extract a video's frames into a scene folder (`frames --video FILE --out DIR [--fps N]`).
     Frames(frames::Args),
+    /// Drop blurry and near-duplicate frames (`keyframes --scene DIR --out DIR`).
+    Keyframes(keyframes::Args),
+    /// The time-budget plan of `run` for an input (`plan --video FILE [--budget-minutes 20]`).
+    Plan(plan::Args),
     /// Summarise a scene folder, COLMAP model, transforms.json or PLY (`inspect PATH`).
     Inspect(inspect::Args),
     /// Evaluate masks, poses or rendered views.
@@ -86,6 +92,8 @@ pub fn dispatch(cmd: &Command, ctx: &Ctx) -> anyhow::Result<serde_json::Value> {
         Command::Export(a) => export::run(a, ctx),
         Command::Frames(a) => frames::run(a, ctx),
         Command::Inspect(a) => inspect::run(a, ctx),
+        Command::Keyframes(a) => keyframes::run(a, ctx),
+        Command::Plan(a) => plan::run(a, ctx),
         Command::Render(a) => render::run(a, ctx),
         Command::Eval(e) => match e {
             EvalCommand::Masks(a) => eval_masks::run(a, ctx),

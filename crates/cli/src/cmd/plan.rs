@@ -1,0 +1,126 @@
+//! `romosplat plan (--video FILE | --scene DIR) [--budget-minutes 20]`: the
+//! time-budget plan `run` would follow (see `crate::plan`), with the training
+//! step rate probed on this machine's adapter.
+
+use super::pose::PoseOpts;
+use super::train::{BackendKind, make_backend};
+use crate::Ctx;
+use crate::plan::{Fixed, Input, Rates, plan, probe_train_rates};
+use anyhow::Context;
+use std::path::PathBuf;
+
+/// Splats in the training-rate probe (a typical mid-run count).
+const PROBE_SPLATS: usize = 30_000;
+
+/// `romosplat plan`
+#[derive(Debug, clap::Args)]
+#[command(group(clap::ArgGroup::new("input").required(true).args(["video", "scene"])))]
+pub struct Args {
+    /// A video file (frame count and size read with ffprobe).
+    #[arg(long)]
+    pub video: Option<PathBuf>,
+    /// A scene folder with `images/`.
+    #[arg(long)]
+    pub scene: Option<PathBuf>,
+    /// Wall-time budget for the whole run, minutes.
+    #[arg(long, default_value_t = 20.0)]
+    pub budget_minutes: f64,
+    /// Training steps (planned when not given).
+    #[arg(long)]
+    pub steps: Option<usize>,
+    /// Training downscale (planned when not given).
+    #[arg(long)]
+    pub downscale: Option<u32>,
+    /// Training backend the probe runs on.
+    #[arg(long, value_enum, default_value_t = BackendKind::Auto)]
+    pub backend: BackendKind,
+    #[command(flatten)]
+    pub pose: PoseOpts,
+}
+
+/// Frame count and size of a video, from ffprobe.
+fn probe_video(video: &std::path::Path) -> anyhow::Result<(usize, u32, u32)> {
+    let out = std::process::Command::new("ffprobe")
+        .args([
+            "-v",
+            "error",
+            "-select_streams",
+            "v:0",
+            "-count_packets",
+            "-show_entries",
+            "stream=width,height,nb_read_packets",
+            "-of",
+            "csv=p=0",
+        ])
+        .arg(video)
+        .output()
+        .with_context(|| "ffprobe not found: apt-get install -y ffmpeg".to_string())?;
+    let text = String::from_utf8_lossy(&out.stdout);
+    let f: Vec<&str> = text.trim().split(',').collect();
+    let parse = |i: usize| f.get(i).and_then(|s| s.trim().parse::<u64>().ok());
+    match (parse(0), parse(1), parse(2)) {
+        (Some(w), Some(h), Some(n)) if out.status.success() => Ok((n as usize, w as u32, h as u32)),
+        _ => anyhow::bail!(
+            "{}: ffprobe could not read a video stream ({})",
+            video.display(),
+            String::from_utf8_lossy(&out.stderr).trim()
+        ),
+    }
+}
+
+/// Plan for an input with the probed adapter.
+pub fn plan_for(
+    input: &Input,
+    budget_minutes: f64,
+    fixed: &Fixed,
+    backend: BackendKind,
+    ctx: &Ctx,
+) -> anyhow::Result<crate::plan::Plan> {
+    anyhow::ensure!(
+        budget_minutes > 0.0 && budget_minutes.is_finite(),
+        "--budget-minutes must be > 0, got {budget_minutes}"
+    );
+    let mut b = make_backend(backend, ctx)?;
+    let (a, per_px) = probe_train_rates(b.as_mut(), input.width, input.height, PROBE_SPLATS)?;
+    let rates = Rates::measured(a, per_px);
+    Ok(plan(input, &rates, budget_minutes * 60.0, fixed))
+}
+
+/// Run `romosplat plan`.
+pub fn run(args: &Args, ctx: &Ctx) -> anyhow::Result<serde_json::Value> {
+    let (frames, w, h) = match (&args.video, &args.scene) {
+        (Some(v), _) => probe_video(v)?,
+        (None, Some(s)) => {
+            let images = s.join("images");
+            let names = loader::scene::list_images(&images)?;
+            let first = names
+                .first()
+                .with_context(|| format!("{}: no images", images.display()))?;
+            let (w, h) = image::image_dimensions(images.join(first))
+                .with_context(|| format!("{}: cannot read", images.join(first).display()))?;
+            (names.len(), w, h)
+        }
+        (None, None) => anyhow::bail!("give --video or --scene"),
+    };
+    let mut colmap = pose::ColmapOptions::default();
+    args.pose.apply(&mut colmap)?;
+    let fixed = Fixed {
+        steps: args.steps,
+        downscale: args.downscale,
+        pose_stride: args.pose.pose_stride,
+        pose_features: args.pose.pose_features,
+        pose_max_image_size: args.pose.pose_max_image_size,
+    };
+    let input = Input {
+        frames,
+        width: w,
+        height: h,
+        overlap: colmap.overlap,
+    };
+    let p = plan_for(&input, args.budget_minutes, &fixed, args.backend, ctx)?;
+    ctx.info(format!("plan for {frames} frames of {w}×{h}:"));
+    for l in p.lines() {
+        ctx.info(format!("  {l}"));
+    }
+    Ok(serde_json::to_value(&p)?)
+}

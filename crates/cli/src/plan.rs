@@ -1,0 +1,491 @@
+//! The time-budget planner of `romosplat run --budget-minutes N`.
+//!
+//! It picks what the user did not set — how many frames go to COLMAP
+//! (stride), COLMAP's SIFT image size and feature count, the training
+//! downscale and step count — so that the estimated wall time of all stages
+//! fits the budget. Estimates come from [`Rates`]: the training step time is
+//! probed on this machine's adapter ([`probe_step_seconds`], a few steps on
+//! synthetic splats at two resolutions, fitted as `a + b · pixels`); the mask
+//! and COLMAP costs are per-pixel / per-feature rates measured on this
+//! 2-core machine ([`Rates::measured`]).
+//!
+//! Order of choices:
+//! 1. masks: every frame, full resolution (RoMo needs consecutive frames);
+//! 2. COLMAP: the best of COLMAP's quality tiers (automatic_reconstructor's
+//!    medium / low, then smaller) whose estimate fits [`POSE_SHARE`] of the
+//!    budget; if even the smallest does not, a frame stride;
+//! 3. training gets what is left after masks, COLMAP and a reserve for
+//!    evaluation / export / report: the finest downscale at which
+//!    [`TARGET_STEPS`] fit, capped at [`MAX_STEPS`]; below that, the coarsest
+//!    allowed downscale with the steps that fit.
+//!
+//! Explicit `--steps`, `--downscale`, `--pose-stride`, `--pose-features` and
+//! `--pose-max-image-size` are kept as given (the plan may then exceed the
+//! budget, and says so).
+
+use serde::Serialize;
+
+/// Share of the budget COLMAP may take.
+pub const POSE_SHARE: f64 = 0.30;
+/// Steps the planner aims for before it trades resolution for them.
+pub const TARGET_STEPS: usize = 3000;
+/// INRIA's first evaluation checkpoint; more is not planned on a CPU budget.
+pub const MAX_STEPS: usize = 7000;
+/// Fewest steps worth training.
+pub const MIN_STEPS: usize = 300;
+/// Shortest training-image side the planner goes down to, pixels.
+pub const MIN_TRAIN_SIDE: u32 = 120;
+
+/// Measured costs.
+#[derive(Debug, Clone, Copy, PartialEq, Serialize)]
+pub struct Rates {
+    /// Training: seconds per step = `train_step_s + train_s_per_px · pixels`.
+    pub train_step_s: f64,
+    pub train_s_per_px: f64,
+    /// RoMo mask stage, seconds per frame pixel.
+    pub mask_s_per_px: f64,
+    /// COLMAP SIFT extraction, seconds per pixel at the SIFT size.
+    pub sift_s_per_px: f64,
+    /// COLMAP matching, seconds per image pair per feature.
+    pub match_s_per_pair_feature: f64,
+    /// COLMAP mapper, seconds per image per 1000 features.
+    pub mapper_s_per_image_kfeature: f64,
+    /// Evaluation, export and report, seconds per training-image pixel
+    /// (renders of the held-out views) plus a fixed part.
+    pub finish_s: f64,
+}
+
+impl Rates {
+    /// Mask and COLMAP rates measured on the 2-core development machine
+    /// (README "run" section: 65 frames of 854×480; `romosplat mask` 0.17 s a
+    /// frame, COLMAP 3.8 SIFT 2.2 s a 854×480 frame, sequential matching with
+    /// overlap 10 at 4096 features 0.6 s a pair), with the training terms
+    /// given by a probe.
+    pub fn measured(train_step_s: f64, train_s_per_px: f64) -> Self {
+        Rates {
+            train_step_s,
+            train_s_per_px,
+            mask_s_per_px: 0.17 / (854.0 * 480.0),
+            sift_s_per_px: 2.2 / (854.0 * 480.0),
+            match_s_per_pair_feature: 0.6 / 4096.0,
+            mapper_s_per_image_kfeature: 0.5,
+            finish_s: 30.0,
+        }
+    }
+}
+
+/// What the planner plans for.
+#[derive(Debug, Clone, Copy, PartialEq, Serialize)]
+pub struct Input {
+    pub frames: usize,
+    pub width: u32,
+    pub height: u32,
+    /// Sequential matching overlap that will be used.
+    pub overlap: u32,
+}
+
+/// Values the user set; `None` = plan it.
+#[derive(Debug, Clone, Copy, Default, PartialEq, Serialize)]
+pub struct Fixed {
+    pub steps: Option<usize>,
+    pub downscale: Option<u32>,
+    pub pose_stride: Option<usize>,
+    pub pose_features: Option<u32>,
+    pub pose_max_image_size: Option<u32>,
+}
+
+/// The plan.
+#[derive(Debug, Clone, PartialEq, Serialize)]
+pub struct Plan {
+    pub budget_s: f64,
+    pub frames: usize,
+    pub pose_stride: usize,
+    pub pose_max_image_size: u32,
+    pub pose_features: u32,
+    pub downscale: u32,
+    pub train_width: u32,
+    pub train_height: u32,
+    pub steps: usize,
+    /// Estimated seconds per stage: mask, pose, train, finish.
+    pub mask_s: f64,
+    pub pose_s: f64,
+    pub train_s: f64,
+    pub finish_s: f64,
+}
+
+impl Plan {
+    /// Total estimate, seconds.
+    pub fn total_s(&self) -> f64 {
+        self.mask_s + self.pose_s + self.train_s + self.finish_s
+    }
+
+    /// Human lines, e.g. `training: 240×135, 3000 steps, ≈ 9 min`.
+    pub fn lines(&self) -> Vec<String> {
+        let m = |s: f64| format!("≈ {:.1} min", s / 60.0);
+        let posed = self.frames.div_ceil(self.pose_stride);
+        vec![
+            format!("masks: {} frames, {}", self.frames, m(self.mask_s)),
+            format!(
+                "COLMAP: {posed} frames (stride {}), SIFT ≤ {} px, {} features, {}",
+                self.pose_stride,
+                self.pose_max_image_size,
+                self.pose_features,
+                m(self.pose_s)
+            ),
+            format!(
+                "training: {}×{} (downscale {}), {} steps, {}",
+                self.train_width,
+                self.train_height,
+                self.downscale,
+                self.steps,
+                m(self.train_s)
+            ),
+            format!(
+                "total {} of the {:.0}-minute budget{}",
+                m(self.total_s()),
+                self.budget_s / 60.0,
+                if self.total_s() > self.budget_s * 1.01 {
+                    " (over budget: set values take precedence)"
+                } else {
+                    ""
+                }
+            ),
+        ]
+    }
+}
+
+/// COLMAP tiers, best first: (max image size, features). The first two are
+/// `colmap automatic_reconstructor`'s medium and low quality.
+const POSE_TIERS: [(u32, u32); 4] = [(1600, 4096), (1000, 2048), (640, 1024), (400, 512)];
+
+fn pose_seconds(r: &Rates, inp: &Input, stride: usize, size: u32, features: u32) -> f64 {
+    let n = inp.frames.div_ceil(stride.max(1)) as f64;
+    let long = f64::from(inp.width.max(inp.height));
+    let s = (f64::from(size) / long).min(1.0);
+    let px = f64::from(inp.width) * f64::from(inp.height) * s * s;
+    // Features actually found are bounded by the image: ~1 per 40 pixels.
+    let feats = f64::from(features).min(px / 40.0);
+    let pairs = n * f64::from(inp.overlap).min(n - 1.0).max(0.0);
+    n * px * r.sift_s_per_px
+        + pairs * feats * r.match_s_per_pair_feature
+        + n * feats / 1000.0 * r.mapper_s_per_image_kfeature
+}
+
+fn train_step(r: &Rates, w: u32, h: u32) -> f64 {
+    r.train_step_s + r.train_s_per_px * f64::from(w) * f64::from(h)
+}
+
+fn scaled(v: u32, d: u32) -> u32 {
+    v.div_ceil(d).max(1)
+}
+
+/// Plan for `input` within `budget_s` seconds. Pure.
+pub fn plan(input: &Input, rates: &Rates, budget_s: f64, fixed: &Fixed) -> Plan {
+    let mask_s = input.frames as f64
+        * f64::from(input.width)
+        * f64::from(input.height)
+        * rates.mask_s_per_px;
+    // COLMAP.
+    let long = input.width.max(input.height);
+    let pose_budget = POSE_SHARE * budget_s;
+    let mut choice = None;
+    'tiers: for (size, feats) in POSE_TIERS {
+        let size = fixed.pose_max_image_size.unwrap_or(size.min(long));
+        let feats = fixed.pose_features.unwrap_or(feats);
+        let strides: Vec<usize> = match fixed.pose_stride {
+            Some(s) => vec![s],
+            None => vec![1],
+        };
+        for stride in strides {
+            let t = pose_seconds(rates, input, stride, size, feats);
+            if t <= pose_budget {
+                choice = Some((stride, size, feats, t));
+                break 'tiers;
+            }
+        }
+    }
+    let (pose_stride, pose_max_image_size, pose_features, pose_s) = choice.unwrap_or_else(|| {
+        // Even the smallest tier is too slow: subsample frames.
+        let (size, feats) = POSE_TIERS[POSE_TIERS.len() - 1];
+        let size = fixed.pose_max_image_size.unwrap_or(size.min(long));
+        let feats = fixed.pose_features.unwrap_or(feats);
+        let mut stride = fixed.pose_stride.unwrap_or(1);
+        if fixed.pose_stride.is_none() {
+            while stride < input.frames / 2
+                && pose_seconds(rates, input, stride, size, feats) > pose_budget
+            {
+                stride += 1;
+            }
+        }
+        (
+            stride,
+            size,
+            feats,
+            pose_seconds(rates, input, stride, size, feats),
+        )
+    });
+    // Training.
+    let finish_s = rates.finish_s;
+    let left = (budget_s - mask_s - pose_s - finish_s).max(0.0);
+    let max_d = (input.width.min(input.height) / MIN_TRAIN_SIDE).max(1);
+    let downscales: Vec<u32> = match fixed.downscale {
+        Some(d) => vec![d],
+        None => (1..=max_d).collect(),
+    };
+    let fit = |d: u32| {
+        let t = train_step(rates, scaled(input.width, d), scaled(input.height, d));
+        (left / t).floor() as usize
+    };
+    let (downscale, steps) = match fixed.steps {
+        Some(steps) => {
+            // Steps set: the finest downscale whose steps fit.
+            let d = downscales
+                .iter()
+                .copied()
+                .find(|&d| fit(d) >= steps)
+                .unwrap_or(*downscales.last().unwrap_or(&1));
+            (d, steps)
+        }
+        None => match downscales.iter().copied().find(|&d| fit(d) >= TARGET_STEPS) {
+            Some(d) => (d, fit(d).min(MAX_STEPS)),
+            None => {
+                let d = *downscales.last().unwrap_or(&1);
+                (d, fit(d).max(MIN_STEPS))
+            }
+        },
+    };
+    // Round planned steps down to a hundred.
+    let steps = if fixed.steps.is_none() && steps >= 200 {
+        steps / 100 * 100
+    } else {
+        steps
+    };
+    let (tw, th) = (
+        scaled(input.width, downscale),
+        scaled(input.height, downscale),
+    );
+    Plan {
+        budget_s,
+        frames: input.frames,
+        pose_stride,
+        pose_max_image_size,
+        pose_features,
+        downscale,
+        train_width: tw,
+        train_height: th,
+        steps,
+        mask_s,
+        pose_s,
+        train_s: steps as f64 * train_step(rates, tw, th),
+        finish_s,
+    }
+}
+
+/// Median seconds of one training step on `backend` at `width`×`height`
+/// with `splats` synthetic splats (3 warm-up steps, then `steps` timed).
+pub fn probe_step_seconds(
+    backend: &mut dyn splat::backend::TrainBackend,
+    width: u32,
+    height: u32,
+    splats: usize,
+    steps: usize,
+) -> anyhow::Result<f64> {
+    use splat::backend::{LossConfig, StepInput};
+    use splat::train::TrainOptions;
+    use splat::types::{RenderCamera, RenderOptions, Splats};
+    let coeffs = 16;
+    let mut s = Splats {
+        means: Vec::with_capacity(splats),
+        log_scales: Vec::with_capacity(splats),
+        rotations: Vec::with_capacity(splats),
+        opacity_logits: Vec::with_capacity(splats),
+        sh: vec![0.0; splats * coeffs * 3],
+        sh_degree: 3,
+    };
+    // A deterministic low-discrepancy cloud filling the view at depth 2–6.
+    for i in 0..splats {
+        let f = i as f32;
+        let (u, v, w) = (
+            (f * 0.618_034).fract(),
+            (f * 0.754_878).fract(),
+            (f * 0.569_840).fract(),
+        );
+        let z = 2.0 + 4.0 * w;
+        s.means.push([(u - 0.5) * z * 1.2, (v - 0.5) * z * 0.8, z]);
+        s.log_scales.push([(-4.0f32); 3]);
+        s.rotations.push([1.0, 0.0, 0.0, 0.0]);
+        s.opacity_logits.push(0.0);
+        s.sh[i * coeffs * 3] = u - 0.5;
+        s.sh[i * coeffs * 3 + 1] = v - 0.5;
+        s.sh[i * coeffs * 3 + 2] = w - 0.5;
+    }
+    let camera = RenderCamera {
+        width,
+        height,
+        fx: width as f32,
+        fy: width as f32,
+        cx: width as f32 / 2.0,
+        cy: height as f32 / 2.0,
+        rotation: [[1.0, 0.0, 0.0], [0.0, 1.0, 0.0], [0.0, 0.0, 1.0]],
+        translation: [0.0; 3],
+        near: 0.01,
+        far: 100.0,
+    };
+    let target: Vec<f32> = (0..(width * height * 3) as usize)
+        .map(|i| ((i * 7919) % 255) as f32 / 255.0)
+        .collect();
+    let start = splat::train::fresh_start(s);
+    backend.upload(&start.splats, &start.adam)?;
+    let opts = TrainOptions::default();
+    let mut times = Vec::new();
+    for k in 0..steps + 3 {
+        let input = StepInput {
+            camera: &camera,
+            target: &target,
+            mask: None,
+            view_id: Some(0),
+            lr: opts.learning_rates(k as u32, 4.0),
+            loss: LossConfig::default(),
+            render: RenderOptions {
+                sh_degree: 3,
+                ..Default::default()
+            },
+        };
+        let t = std::time::Instant::now();
+        backend.step(&input)?;
+        if k >= 3 {
+            times.push(t.elapsed().as_secs_f64());
+        }
+    }
+    times.sort_by(f64::total_cmp);
+    Ok(times[times.len() / 2])
+}
+
+/// Fit `a + b · pixels` from probes at two sizes of a `w`×`h` frame (longer
+/// side 160 and 480 px). Returns (a, b).
+pub fn probe_train_rates(
+    backend: &mut dyn splat::backend::TrainBackend,
+    w: u32,
+    h: u32,
+    splats: usize,
+) -> anyhow::Result<(f64, f64)> {
+    let size = |long: u32| {
+        let s = f64::from(long) / f64::from(w.max(h));
+        (
+            ((f64::from(w) * s).round() as u32).max(8),
+            ((f64::from(h) * s).round() as u32).max(8),
+        )
+    };
+    let (w0, h0) = size(160);
+    let (w1, h1) = size(480);
+    let t0 = probe_step_seconds(backend, w0, h0, splats, 5)?;
+    let t1 = probe_step_seconds(backend, w1, h1, splats, 5)?;
+    let (p0, p1) = (f64::from(w0 * h0), f64::from(w1 * h1));
+    let b = ((t1 - t0) / (p1 - p0)).max(0.0);
+    let a = (t0 - b * p0).max(0.0);
+    Ok((a, b))
+}
+
+#[cfg(test)]
+mod tests {
+    #![allow(clippy::unwrap_used, clippy::expect_used)]
+    use super::*;
+
+    fn video() -> Input {
+        Input {
+            frames: 65,
+            width: 854,
+            height: 480,
+            overlap: 10,
+        }
+    }
+
+    /// 0.05 s a step plus 0.5 µs a pixel: 240×135 → 0.066 s a step.
+    fn rates() -> Rates {
+        Rates::measured(0.05, 0.5e-6)
+    }
+
+    #[test]
+    fn plan_fits_the_budget() {
+        for minutes in [5.0, 10.0, 20.0, 60.0] {
+            let b = minutes * 60.0;
+            let p = plan(&video(), &rates(), b, &Fixed::default());
+            assert!(p.total_s() <= b, "{minutes} min: {:?}", p.lines());
+            assert!(p.steps >= MIN_STEPS);
+            assert!(p.pose_s <= POSE_SHARE * b + 1e-9, "{p:?}");
+        }
+    }
+
+    #[test]
+    fn more_budget_buys_quality() {
+        let small = plan(&video(), &rates(), 600.0, &Fixed::default());
+        let large = plan(&video(), &rates(), 3600.0, &Fixed::default());
+        let px = |p: &Plan| u64::from(p.train_width * p.train_height) * p.steps as u64;
+        assert!(px(&large) > px(&small), "{small:?} {large:?}");
+        assert!(large.pose_max_image_size >= small.pose_max_image_size);
+    }
+
+    #[test]
+    fn a_slow_adapter_gets_coarser_training() {
+        let fast = plan(&video(), &rates(), 1200.0, &Fixed::default());
+        let slow = plan(
+            &video(),
+            &Rates::measured(0.2, 4e-6),
+            1200.0,
+            &Fixed::default(),
+        );
+        assert!(slow.downscale > fast.downscale, "{fast:?} {slow:?}");
+        assert!(slow.total_s() <= 1200.0);
+    }
+
+    #[test]
+    fn set_values_win() {
+        let f = Fixed {
+            steps: Some(123),
+            downscale: Some(3),
+            pose_stride: Some(2),
+            pose_features: Some(777),
+            pose_max_image_size: Some(500),
+        };
+        let p = plan(&video(), &rates(), 1200.0, &f);
+        assert_eq!(
+            (
+                p.steps,
+                p.downscale,
+                p.pose_stride,
+                p.pose_features,
+                p.pose_max_image_size
+            ),
+            (123, 3, 2, 777, 500)
+        );
+        assert_eq!((p.train_width, p.train_height), (285, 160));
+        // Set values may exceed the budget; the plan says so.
+        let over = plan(
+            &video(),
+            &rates(),
+            60.0,
+            &Fixed {
+                steps: Some(7000),
+                downscale: Some(1),
+                ..Fixed::default()
+            },
+        );
+        assert!(over.total_s() > 60.0);
+        assert!(
+            over.lines()[3].contains("over budget"),
+            "{:?}",
+            over.lines()
+        );
+    }
+
+    #[test]
+    fn long_videos_are_subsampled_for_colmap() {
+        let long = Input {
+            frames: 2000,
+            ..video()
+        };
+        let p = plan(&long, &rates(), 1200.0, &Fixed::default());
+        assert!(p.pose_stride > 1, "{p:?}");
+        assert!(p.pose_s <= POSE_SHARE * 1200.0, "{p:?}");
+    }
+}
