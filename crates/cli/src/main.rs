@@ -41,17 +41,48 @@ fn main() {
             }
         }
         Err(err) => {
-            // One line: the chain of causes joined, no backtrace.
-            let msg = err
-                .chain()
-                .map(|c| c.to_string())
-                .collect::<Vec<_>>()
-                .join(": ");
+            let msg = one_line(&err);
             if ctx.json {
                 println!("{}", serde_json::json!({ "error": msg }));
             }
             eprintln!("error: {msg}");
             std::process::exit(1);
         }
+    }
+}
+
+/// The error as one line: the chain of causes joined with ": ", each cause
+/// once (errors that already print their source, such as the loader's
+/// `path: os error`, are not repeated by their source), whitespace and
+/// newlines collapsed.
+fn one_line(err: &anyhow::Error) -> String {
+    let mut msg = String::new();
+    for cause in err.chain() {
+        let text = cause.to_string();
+        let text = text.split_whitespace().collect::<Vec<_>>().join(" ");
+        if text.is_empty() || msg.contains(&text) {
+            continue;
+        }
+        if !msg.is_empty() {
+            msg.push_str(": ");
+        }
+        msg.push_str(&text);
+    }
+    msg
+}
+
+#[cfg(test)]
+mod tests {
+    use super::one_line;
+
+    #[test]
+    fn causes_are_printed_once_on_one_line() {
+        let os = std::io::Error::from_raw_os_error(17);
+        let e = loader::LoaderError::io("out/tr", os);
+        let line = one_line(&anyhow::Error::new(e).context("train"));
+        assert_eq!(line.matches("os error 17").count(), 1, "{line}");
+        assert!(line.starts_with("train: out/tr: "), "{line}");
+        let multi = anyhow::anyhow!("a\n  b\n\tc");
+        assert_eq!(one_line(&multi), "a b c");
     }
 }

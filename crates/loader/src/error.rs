@@ -60,3 +60,19 @@ impl LoaderError {
         }
     }
 }
+
+/// A TOML parse error as one line: `path: line L, column C: message`
+/// (toml's own text quotes the source over several lines).
+pub fn toml_error(path: &Path, text: &str, e: &toml::de::Error) -> LoaderError {
+    let msg = e.message().split_whitespace().collect::<Vec<_>>().join(" ");
+    let msg = match e.span() {
+        Some(span) => {
+            let before = &text.as_bytes()[..span.start.min(text.len())];
+            let line = before.iter().filter(|b| **b == b'\n').count() + 1;
+            let col = before.iter().rev().take_while(|b| **b != b'\n').count() + 1;
+            format!("line {line}, column {col}: {msg}")
+        }
+        None => msg,
+    };
+    LoaderError::format(path, msg)
+}

@@ -157,7 +157,7 @@ pub fn inspect(path: impl AsRef<Path>) -> Result<InspectReport> {
             _ => {
                 return Err(LoaderError::format(
                     path,
-                    "cannot inspect: expected a folder, a .ply or a transforms .json",
+                    "cannot inspect: expected a folder, a .ply, .spz, .splat, .glb or a transforms .json",
                 ));
             }
         }

@@ -62,6 +62,105 @@ where
     result
 }
 
+/// A folder of outputs that appears completely or not at all: a stage
+/// writes its files into [`Staging::path`] (a hidden sibling of the
+/// destination, on the same file system) and [`Staging::commit`] moves them
+/// into place with renames, which need no disk space. Dropping an
+/// uncommitted staging folder deletes it, so a failed stage (disk full, bad
+/// input, a panic unwinding) leaves the destination as it was.
+///
+/// When the destination does not exist the whole folder is renamed in one
+/// step; otherwise each staged entry is renamed over its counterpart
+/// (files replaced, folders merged), leaving other files there untouched.
+#[derive(Debug)]
+pub struct Staging {
+    stage: PathBuf,
+    dest: PathBuf,
+    committed: bool,
+}
+
+impl Staging {
+    /// Create the staging folder for `dest` (its parent is created if needed).
+    pub fn new(dest: impl AsRef<Path>) -> Result<Staging> {
+        let dest = dest.as_ref().to_path_buf();
+        let parent = match dest.parent() {
+            Some(p) if !p.as_os_str().is_empty() => p.to_path_buf(),
+            _ => PathBuf::from("."),
+        };
+        let name = dest
+            .file_name()
+            .map(|s| s.to_string_lossy().into_owned())
+            .unwrap_or_else(|| "out".into());
+        let n = TMP_COUNTER.fetch_add(1, Ordering::Relaxed);
+        let stage = parent.join(format!(".{name}.stage.{}.{n}", std::process::id()));
+        std::fs::create_dir_all(&stage).map_err(|e| LoaderError::io(&stage, e))?;
+        Ok(Staging {
+            stage,
+            dest,
+            committed: false,
+        })
+    }
+
+    /// The folder to write into.
+    pub fn path(&self) -> &Path {
+        &self.stage
+    }
+
+    /// The final destination.
+    pub fn dest(&self) -> &Path {
+        &self.dest
+    }
+
+    /// Move everything staged into the destination.
+    pub fn commit(mut self) -> Result<PathBuf> {
+        if !self.dest.exists() {
+            std::fs::rename(&self.stage, &self.dest).map_err(|e| LoaderError::io(&self.dest, e))?;
+        } else {
+            if !self.dest.is_dir() {
+                return Err(LoaderError::format(
+                    &self.dest,
+                    "exists and is not a folder; choose another output path",
+                ));
+            }
+            merge_move(&self.stage, &self.dest)?;
+            let _ = std::fs::remove_dir_all(&self.stage);
+        }
+        self.committed = true;
+        Ok(self.dest.clone())
+    }
+}
+
+impl Drop for Staging {
+    fn drop(&mut self) {
+        if !self.committed {
+            let _ = std::fs::remove_dir_all(&self.stage);
+        }
+    }
+}
+
+/// Rename every entry of `from` into `to`: files replace files, folders are
+/// merged (created by renaming when absent).
+fn merge_move(from: &Path, to: &Path) -> Result<()> {
+    let entries = std::fs::read_dir(from).map_err(|e| LoaderError::io(from, e))?;
+    for entry in entries {
+        let entry = entry.map_err(|e| LoaderError::io(from, e))?;
+        let src = entry.path();
+        let dst = to.join(entry.file_name());
+        if src.is_dir() && dst.is_dir() {
+            merge_move(&src, &dst)?;
+        } else {
+            if dst.is_dir() {
+                return Err(LoaderError::format(
+                    &dst,
+                    "is a folder where a file was to be written",
+                ));
+            }
+            std::fs::rename(&src, &dst).map_err(|e| LoaderError::io(&dst, e))?;
+        }
+    }
+    Ok(())
+}
+
 /// Write `bytes` to `path` atomically.
 pub fn write_bytes_atomic(path: impl AsRef<Path>, bytes: &[u8]) -> Result<()> {
     let path = path.as_ref();
@@ -176,6 +275,35 @@ pub fn write_png_rgb32f(path: impl AsRef<Path>, img: &Rgb32FImage) -> Result<()>
 mod tests {
     #![allow(clippy::unwrap_used, clippy::expect_used)]
     use super::*;
+
+    /// A stage that fails leaves nothing behind; one that succeeds appears
+    /// whole, merging into an existing folder without touching other files.
+    #[test]
+    fn staging_is_all_or_nothing() {
+        let dir = tempfile::tempdir().unwrap();
+        let dest = dir.path().join("out");
+        {
+            let st = Staging::new(&dest).unwrap();
+            write_bytes_atomic(st.path().join("masks/a.png"), b"1").unwrap();
+            // An error before commit: the staging folder is dropped.
+        }
+        let left: Vec<_> = std::fs::read_dir(dir.path()).unwrap().collect();
+        assert!(left.is_empty() && !dest.exists(), "{left:?}");
+        let st = Staging::new(&dest).unwrap();
+        write_bytes_atomic(st.path().join("masks/a.png"), b"1").unwrap();
+        assert!(!dest.exists());
+        st.commit().unwrap();
+        assert_eq!(std::fs::read(dest.join("masks/a.png")).unwrap(), b"1");
+        std::fs::write(dest.join("keep.txt"), b"k").unwrap();
+        let st = Staging::new(&dest).unwrap();
+        write_bytes_atomic(st.path().join("masks/a.png"), b"2").unwrap();
+        write_bytes_atomic(st.path().join("masks/b.png"), b"3").unwrap();
+        st.commit().unwrap();
+        assert_eq!(std::fs::read(dest.join("masks/a.png")).unwrap(), b"2");
+        assert_eq!(std::fs::read(dest.join("masks/b.png")).unwrap(), b"3");
+        assert_eq!(std::fs::read(dest.join("keep.txt")).unwrap(), b"k");
+        assert_eq!(std::fs::read_dir(dir.path()).unwrap().count(), 1);
+    }
 
     #[test]
     fn atomic_write_replaces_and_leaves_no_temp() {

@@ -37,6 +37,10 @@ pub struct Frame {
     pub gt_motion_path: Option<PathBuf>,
 }
 
+/// Smallest image side (pixels) a scene may be loaded at: below one 16×16
+/// tile, SSIM's 11-pixel window and the rasteriser's tiles degenerate.
+pub const MIN_SIDE: u32 = 16;
+
 /// How to load a scene.
 #[derive(Debug, Clone, Serialize, Deserialize)]
 pub struct SceneOptions {
@@ -196,6 +200,19 @@ impl Scene {
                     (full_path, (s(full.0), s(full.1)))
                 }
             };
+            if n > 1 && loaded.0.min(loaded.1) < MIN_SIDE {
+                let largest = (full.0.min(full.1) as f64 / (MIN_SIDE as f64 - 0.5))
+                    .floor()
+                    .max(1.0);
+                return Err(LoaderError::Invalid(format!(
+                    "downscale {n} leaves {}x{} px of {} ({}x{}); images need at least {MIN_SIDE} px per side, so use a downscale from 1 to {largest}",
+                    loaded.0,
+                    loaded.1,
+                    image_path.display(),
+                    full.0,
+                    full.1
+                )));
+            }
             let (camera, pose) = match cams.get(name) {
                 Some((c, p)) => (Some(c.clone()), Some(*p)),
                 None => (None, None),
@@ -223,6 +240,18 @@ impl Scene {
                 None
             };
             let gp = gt_motion_path(&root.join("gt_motion"), name);
+            if gp.is_file() {
+                let gd = dims(&gp)?;
+                if gd != full {
+                    return Err(LoaderError::format(
+                        &gp,
+                        format!(
+                            "ground-truth mask is {}x{} but its image {name} is {}x{}",
+                            gd.0, gd.1, full.0, full.1
+                        ),
+                    ));
+                }
+            }
             frames.push(Frame {
                 name: name.clone(),
                 image_path,

@@ -87,26 +87,28 @@ fn loads_colmap_scene_with_masks_split_and_gt() {
 fn downscale_resizes_or_uses_images_n() {
     let dir = tempfile::tempdir().unwrap();
     let root = dir.path();
-    write_images(root, 8, 6);
+    // Images 8× the camera's 8×6 calibration size: intrinsics scale by 4
+    // after the downscale of 2.
+    write_images(root, 64, 48);
     write_model_binary(&model(), root.join("sparse/0")).unwrap();
-    let mut mask = GrayImage::from_pixel(8, 6, Luma([255]));
-    mask.put_pixel(7, 5, Luma([0]));
+    let mut mask = GrayImage::from_pixel(64, 48, Luma([255]));
+    mask.put_pixel(63, 47, Luma([0]));
     write_png_gray8(root.join("masks/a.png.png"), &mask).unwrap();
     let s = Scene::load(root, &SceneOptions { downscale: 2 }).unwrap();
     let k = s.frames[0].intrinsics;
     assert_eq!(
         (k.width, k.height, k.fx, k.fy, k.cx, k.cy),
-        (4, 3, 5.0, 5.5, 2.0, 1.5)
+        (32, 24, 40.0, 44.0, 16.0, 12.0)
     );
-    assert_eq!(s.load_image(0).unwrap().dimensions(), (4, 3));
+    assert_eq!(s.load_image(0).unwrap().dimensions(), (32, 24));
     let m = s.load_mask(0).unwrap().unwrap();
-    assert_eq!(m.dimensions(), (4, 3));
-    assert_eq!(m.get_pixel(3, 2).0[0], 0); // nearest keeps the hard edge value
+    assert_eq!(m.dimensions(), (32, 24));
+    assert_eq!(m.get_pixel(31, 23).0[0], 0); // nearest keeps the hard edge value
     // With images_2/ present the files there are used as they are.
     for n in NAMES {
         write_png_rgb8(
             root.join("images_2").join(n),
-            &RgbImage::from_pixel(4, 3, Rgb([9, 9, 9])),
+            &RgbImage::from_pixel(32, 24, Rgb([9, 9, 9])),
         )
         .unwrap();
     }
@@ -114,6 +116,14 @@ fn downscale_resizes_or_uses_images_n() {
     assert!(s.frames[0].image_path.starts_with(root.join("images_2")));
     assert_eq!(s.load_image(0).unwrap().get_pixel(0, 0).0[0], 9.0 / 255.0);
     assert!(Scene::load(root, &SceneOptions { downscale: 0 }).is_err());
+    // A downscale leaving fewer than 16 px per side is refused with the range.
+    let e = Scene::load(root, &SceneOptions { downscale: 4 })
+        .unwrap_err()
+        .to_string();
+    assert!(
+        e.contains("downscale 4 leaves 16x12 px") && e.contains("from 1 to 3"),
+        "{e}"
+    );
 }
 
 #[test]

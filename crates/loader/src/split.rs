@@ -52,12 +52,59 @@ impl ResolvedSplit {
     }
 }
 
-/// Read split.json.
+/// Read split.json. Entries must be non-negative integers (indices) or
+/// strings (names); errors say which list and entry, in our words.
 pub fn read_split(path: impl AsRef<Path>) -> Result<Split> {
     let path = path.as_ref();
     let text = read_string(path)?;
-    serde_json::from_str(&text)
-        .map_err(|e| LoaderError::format(path, format!("invalid split.json: {e}")))
+    parse_split(&text, path)
+}
+
+/// Parse split.json text; `path` names it in errors.
+pub fn parse_split(text: &str, path: &Path) -> Result<Split> {
+    let bad = |m: String| LoaderError::format(path, m);
+    let value: serde_json::Value = serde_json::from_str(text).map_err(|e| {
+        bad(format!(
+            "not valid JSON (line {}, column {})",
+            e.line(),
+            e.column()
+        ))
+    })?;
+    let obj = value
+        .as_object()
+        .ok_or_else(|| bad("expected an object with \"clutter\" and \"extra\" lists".into()))?;
+    let list = |key: &str| -> Result<Option<Vec<SplitEntry>>> {
+        let Some(v) = obj.get(key) else {
+            return Ok(None);
+        };
+        let arr = v
+            .as_array()
+            .ok_or_else(|| bad(format!("{key}: expected a list of image indices or names")))?;
+        arr.iter()
+            .enumerate()
+            .map(|(i, e)| match e {
+                serde_json::Value::String(n) => Ok(SplitEntry::Name(n.clone())),
+                serde_json::Value::Number(n) => match (n.as_u64(), n.as_i64()) {
+                    (Some(u), _) => usize::try_from(u)
+                        .map(SplitEntry::Index)
+                        .map_err(|_| bad(format!("{key}[{i}]: index {u} out of range"))),
+                    (None, Some(neg)) => Err(bad(format!(
+                        "{key}[{i}]: index {neg} is negative (indices count from 0)"
+                    ))),
+                    _ => Err(bad(format!("{key}[{i}]: {n} is not a whole-number index"))),
+                },
+                other => Err(bad(format!(
+                    "{key}[{i}]: {other} is neither an image index nor a name"
+                ))),
+            })
+            .collect::<Result<Vec<_>>>()
+            .map(Some)
+    };
+    Ok(Split {
+        clutter: list("clutter")?.unwrap_or_default(),
+        extra: list("extra")?.unwrap_or_default(),
+        clean: list("clean")?,
+    })
 }
 
 /// Write split.json atomically.
@@ -114,11 +161,24 @@ impl Split {
                 .map(|e| one(list, e))
                 .collect::<Result<Vec<usize>>>()
         };
-        Ok(ResolvedSplit {
+        let r = ResolvedSplit {
             clutter: all("clutter", &self.clutter)?,
             extra: all("extra", &self.extra)?,
             clean: self.clean.as_ref().map(|c| all("clean", c)).transpose()?,
-        })
+        };
+        // Held-out views must not be trained on.
+        for (list, v) in [("clutter", Some(&r.clutter)), ("clean", r.clean.as_ref())] {
+            if let Some(i) = v.and_then(|v| v.iter().find(|i| r.extra.contains(i))) {
+                return Err(LoaderError::format(
+                    path,
+                    format!(
+                        "image {} ({}) is in both {list} (training) and extra (held out)",
+                        i, names[*i]
+                    ),
+                ));
+            }
+        }
+        Ok(r)
     }
 }
 
@@ -186,6 +246,29 @@ mod tests {
         assert!(e.contains("split.json") && e.contains("zzz.png"), "{e}");
         std::fs::write(&p, r#"{"clutter": [1.5]}"#).unwrap();
         let e = read_split(&p).unwrap_err().to_string();
-        assert!(e.contains("split.json") && e.contains("invalid"), "{e}");
+        assert!(
+            e.contains("split.json") && e.contains("clutter[0]: 1.5 is not a whole-number index"),
+            "{e}"
+        );
+        std::fs::write(&p, r#"{"clutter": [0, -1]}"#).unwrap();
+        let e = read_split(&p).unwrap_err().to_string();
+        assert!(
+            e.contains("split.json: clutter[1]: index -1 is negative"),
+            "{e}"
+        );
+        assert!(!e.contains("untagged"), "{e}");
+        std::fs::write(&p, r#"{"clutter": [0, 1], "extra": ["001.jpg"]}"#).unwrap();
+        let e = read_split(&p)
+            .unwrap()
+            .resolve(&p, &names())
+            .unwrap_err()
+            .to_string();
+        assert!(
+            e.contains("split.json") && e.contains("image 1 (001.jpg) is in both clutter"),
+            "{e}"
+        );
+        std::fs::write(&p, "[1, 2]").unwrap();
+        let e = read_split(&p).unwrap_err().to_string();
+        assert!(e.contains("expected an object"), "{e}");
     }
 }

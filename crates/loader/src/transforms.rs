@@ -210,6 +210,59 @@ fn matrix_from_rows(path: &Path, idx: usize, rows: &[Vec<f64>]) -> Result<Matrix
     Ok(m)
 }
 
+/// Largest deviation from orthonormality (max |RᵀR − I|) and from
+/// det R = 1 accepted in a camera-to-world rotation. Poses written as text
+/// with 6–7 significant digits are orthonormal to ~1e-6; a scaled or sheared
+/// matrix is off by far more.
+pub const ROTATION_TOLERANCE: f64 = 1e-3;
+
+/// Check that the upper-left 3×3 of a camera-to-world matrix is a proper
+/// rotation (orthonormal, determinant +1), saying by how much it is not.
+pub fn check_rotation(m: &Matrix4<f64>) -> std::result::Result<(), String> {
+    let r = m.fixed_view::<3, 3>(0, 0).into_owned();
+    let dev = (r.transpose() * r - Matrix3::identity()).amax();
+    if !(dev <= ROTATION_TOLERANCE) {
+        return Err(format!(
+            "rotation is not orthonormal (max |RᵀR − I| = {dev:.3e}, tolerance {ROTATION_TOLERANCE:e})"
+        ));
+    }
+    let det = r.determinant();
+    if !((det - 1.0).abs() <= ROTATION_TOLERANCE) {
+        return Err(format!(
+            "rotation has determinant {det:.4} (a reflection, not a rotation)"
+        ));
+    }
+    Ok(())
+}
+
+/// True when `p` lies inside `base`, compared lexically (`..` resolved
+/// without following symlinks, so a scene whose `images/` is a link
+/// still counts as inside).
+pub fn is_inside(base: &Path, p: &Path) -> bool {
+    fn norm(p: &Path) -> Option<Vec<std::ffi::OsString>> {
+        let abs = if p.is_absolute() {
+            p.to_path_buf()
+        } else {
+            std::env::current_dir().ok()?.join(p)
+        };
+        let mut out: Vec<std::ffi::OsString> = Vec::new();
+        for c in abs.components() {
+            match c {
+                std::path::Component::ParentDir => {
+                    out.pop()?;
+                }
+                std::path::Component::CurDir => {}
+                other => out.push(other.as_os_str().to_owned()),
+            }
+        }
+        Some(out)
+    }
+    match (norm(base), norm(p)) {
+        (Some(b), Some(q)) => q.len() > b.len() && q.starts_with(&b),
+        _ => false,
+    }
+}
+
 /// Read and parse a transforms.json (no file checks; see [`Transforms::resolve`]).
 pub fn read_transforms(path: impl AsRef<Path>) -> Result<Transforms> {
     let path = path.as_ref();
@@ -301,9 +354,23 @@ impl Transforms {
                 .file_name()
                 .map(|s| s.to_string_lossy().into_owned())
                 .unwrap_or_default();
+            if !is_inside(base, &image_path) {
+                return Err(LoaderError::format(
+                    path,
+                    format!(
+                        "frame {idx}: file_path {:?} is outside the scene folder {}",
+                        f.file_path,
+                        base.display()
+                    ),
+                ));
+            }
             let fields = f.intrinsics.or(&self.intrinsics);
             let camera = camera_from_fields(path, idx, &fields, &image_path)?;
-            let pose = pose_from_c2w_opengl(&matrix_from_rows(path, idx, &f.transform_matrix)?);
+            let c2w = matrix_from_rows(path, idx, &f.transform_matrix)?;
+            check_rotation(&c2w).map_err(|m| {
+                LoaderError::format(path, format!("frame {idx} ({}): {m}", f.file_path))
+            })?;
+            let pose = pose_from_c2w_opengl(&c2w);
             out.push(ResolvedFrame {
                 image_path,
                 name,
@@ -387,6 +454,64 @@ mod tests {
 
     fn touch_png(p: &Path, w: u32, h: u32) {
         crate::io::write_png_gray8(p, &image::GrayImage::new(w, h)).unwrap();
+    }
+
+    /// Frames whose matrix is not a rotation, or whose image lies outside
+    /// the scene folder, are refused naming the file and the frame.
+    #[test]
+    fn bad_rotations_and_outside_paths_are_refused() {
+        let dir = tempfile::tempdir().unwrap();
+        let scene = dir.path().join("scene");
+        touch_png(&scene.join("images/a.png"), 4, 3);
+        touch_png(&dir.path().join("secret.png"), 4, 3);
+        let p = scene.join("transforms.json");
+        let check = |file: &str, m: [[f64; 4]; 4], want: &str| {
+            let t = serde_json::json!({
+                "fl_x": 3.0, "w": 4, "h": 3,
+                "frames": [
+                    {"file_path": "images/a.png", "transform_matrix": [[1, 0, 0, 0], [0, 1, 0, 0], [0, 0, 1, 0], [0, 0, 0, 1]]},
+                    {"file_path": file, "transform_matrix": m},
+                ]
+            });
+            std::fs::write(&p, t.to_string()).unwrap();
+            let r = read_transforms(&p).unwrap().resolve(&p, &scene);
+            match want {
+                "" => assert!(r.is_ok(), "{r:?}"),
+                _ => {
+                    let e = r.unwrap_err().to_string();
+                    assert!(
+                        e.contains("transforms.json: frame 1") && e.contains(want),
+                        "{e} (wanted {want})"
+                    );
+                }
+            }
+        };
+        let id = [
+            [1.0, 0.0, 0.0, 0.5],
+            [0.0, 1.0, 0.0, 0.0],
+            [0.0, 0.0, 1.0, 0.0],
+            [0.0, 0.0, 0.0, 1.0],
+        ];
+        check("images/a.png", id, "");
+        let mut scaled = id;
+        for r in scaled.iter_mut().take(3) {
+            for v in r.iter_mut().take(3) {
+                *v *= 3.0;
+            }
+        }
+        check("images/a.png", scaled, "max |RᵀR − I| = 8.000e0");
+        let mut singular = id;
+        singular[2] = [0.0, 0.0, 0.0, 0.0];
+        check("images/a.png", singular, "not orthonormal");
+        let mut mirror = id;
+        mirror[0][0] = -1.0;
+        check("images/a.png", mirror, "determinant -1");
+        check("../secret.png", id, "outside the scene folder");
+        check(
+            dir.path().join("secret.png").to_str().unwrap(),
+            id,
+            "outside the scene folder",
+        );
     }
 
     #[test]

@@ -41,6 +41,16 @@ pub fn extract_frames_with(
             context: "video".into(),
         });
     }
+    if let (Some(f), Some(rate)) = (fps, video_frame_rate(program, video)) {
+        // Asking for more frames per second than the video has would only
+        // duplicate frames (ffmpeg's fps filter repeats them).
+        if f > rate * (1.0 + 1e-6) {
+            return Err(LoaderError::Invalid(format!(
+                "--fps {f} is above the frame rate of {} ({rate:.3} fps); use 0 < fps <= {rate:.3}",
+                video.display()
+            )));
+        }
+    }
     let images = out_dir.join("images");
     if images.is_dir()
         && std::fs::read_dir(&images)
@@ -107,6 +117,36 @@ fn run_ffmpeg(program: &str, video: &Path, out: &Path, fps: Option<f64>) -> Resu
     Ok(())
 }
 
+/// The video's frame rate from `ffprobe` (next to `program`), or `None`
+/// when ffprobe is missing or reports none (the check is then skipped and
+/// ffmpeg has the last word).
+fn video_frame_rate(program: &str, video: &Path) -> Option<f64> {
+    let probe = match program.strip_suffix("ffmpeg") {
+        Some(prefix) => format!("{prefix}ffprobe"),
+        None => "ffprobe".into(),
+    };
+    let out = Command::new(probe)
+        .args(["-v", "error", "-select_streams", "v:0"])
+        .args(["-show_entries", "stream=avg_frame_rate,r_frame_rate"])
+        .args(["-of", "default=noprint_wrappers=1:nokey=1"])
+        .arg(video)
+        .output()
+        .ok()?;
+    if !out.status.success() {
+        return None;
+    }
+    // The larger of the average and the base rate: variable-rate videos
+    // may legitimately be sampled up to their base rate.
+    String::from_utf8_lossy(&out.stdout)
+        .lines()
+        .filter_map(|l| {
+            let (n, d) = l.trim().split_once('/')?;
+            let (n, d) = (n.parse::<f64>().ok()?, d.parse::<f64>().ok()?);
+            (n > 0.0 && d > 0.0).then_some(n / d)
+        })
+        .reduce(f64::max)
+}
+
 /// True when `ffmpeg -version` runs.
 pub fn ffmpeg_available() -> bool {
     Command::new("ffmpeg")
@@ -169,6 +209,15 @@ mod tests {
         assert_eq!(image::image_dimensions(&frames[9]).unwrap(), (64, 48));
         let frames = extract_frames(&v, dir.path().join("slow"), Some(5.0)).unwrap();
         assert_eq!(frames.len(), 5);
+        // Above the video's 10 fps: refused with the range, nothing written.
+        let e = extract_frames(&v, dir.path().join("fast"), Some(1000.0))
+            .unwrap_err()
+            .to_string();
+        assert!(
+            e.contains("--fps 1000") && e.contains("fps <= 10.000"),
+            "{e}"
+        );
+        assert!(!dir.path().join("fast").exists());
         // A second run into the same folder refuses to overwrite.
         let e = extract_frames(&v, &out, None).unwrap_err().to_string();
         assert!(e.contains("images") && e.contains("not empty"), "{e}");

@@ -125,6 +125,21 @@ pub fn umeyama(src: &[Vector3<f64>], dst: &[Vector3<f64>], with_scale: bool) -> 
     let d = svd.singular_values;
     let dmax = d.max();
     let rank = d.iter().filter(|s| **s > dmax * 1e-12 && **s > 0.0).count();
+    // A trajectory whose centres do not move (pure rotation, or a single
+    // repeated pose) has no shape to align: the cross-covariance is then
+    // float noise and the scale would come out as ~0.
+    let sigma_y = dst.iter().map(|y| (y - mean_y).norm_squared()).sum::<f64>() / nf;
+    let still = |sigma: f64, mean: &Vector3<f64>| {
+        !(sigma.is_finite() && sigma.sqrt() > 1e-9 * mean.norm().max(1e-3))
+    };
+    for (sigma, mean, which) in [(sigma_x, &mean_x, "source"), (sigma_y, &mean_y, "target")] {
+        if still(sigma, mean) {
+            return Err(PoseError::Degenerate(format!(
+                "the {which} camera centres do not move (spread {:.1e}): no parallax, e.g. a pure rotation; a trajectory alignment and its scale are undefined",
+                sigma.sqrt()
+            )));
+        }
+    }
     if rank < 2 || !sigma_x.is_finite() || sigma_x <= 0.0 {
         return Err(PoseError::Degenerate(
             "camera centres are (nearly) collinear or coincident; alignment is not possible".into(),
@@ -141,6 +156,11 @@ pub fn umeyama(src: &[Vector3<f64>], dst: &[Vector3<f64>], with_scale: bool) -> 
     } else {
         1.0
     };
+    if !(scale.is_finite() && scale > 0.0) {
+        return Err(PoseError::Degenerate(format!(
+            "alignment scale {scale} is not positive: the trajectories do not correspond"
+        )));
+    }
     let translation = mean_y - scale * (rotation * mean_x);
     Ok(Sim3 {
         scale,
@@ -501,6 +521,19 @@ mod tests {
             Err(PoseError::Degenerate(_))
         ));
         assert!(umeyama(&src[..2], &dst[..2], true).is_err());
+        // A pure rotation: the target centres sit at one point (up to float
+        // noise) while the estimate has jitter. The alignment is refused
+        // with "no parallax" instead of a scale of ~0.
+        let still: Vec<_> = (0..6)
+            .map(|i| Vector3::new(1e-17 * i as f64, 0.0, 2.0))
+            .collect();
+        let jitter: Vec<_> = src.iter().chain(&src[..2]).map(|p| p * 1e-3).collect();
+        for (a, b) in [(&jitter, &still), (&still, &jitter)] {
+            match umeyama(a, b, true) {
+                Err(PoseError::Degenerate(m)) => assert!(m.contains("no parallax"), "{m}"),
+                other => panic!("expected a degenerate-trajectory error, got {other:?}"),
+            }
+        }
     }
 
     #[test]

@@ -17,165 +17,105 @@ fn ferr(path: &Path, msg: impl Into<String>) -> SplatError {
     }
 }
 
-/// Encode splats as an INRIA PLY.
-pub fn encode_ply(s: &Splats) -> Result<Vec<u8>> {
+/// Convert to the loader's PLY arrays (f_rest channel-major, see `loader::ply`).
+pub fn to_ply_splats(s: &Splats) -> Result<loader::ply::PlySplats> {
     crate::error::check_splats(s)?;
     let k = s.coeffs_per_channel();
-    let n_rest = 3 * (k - 1);
-    let mut h = format!(
-        "ply\nformat binary_little_endian 1.0\nelement vertex {}\n",
-        s.len()
-    );
-    for p in [
-        "x", "y", "z", "nx", "ny", "nz", "f_dc_0", "f_dc_1", "f_dc_2",
-    ] {
-        h += &format!("property float {p}\n");
-    }
-    for i in 0..n_rest {
-        h += &format!("property float f_rest_{i}\n");
-    }
-    h += "property float opacity\n";
-    for p in [
-        "scale_0", "scale_1", "scale_2", "rot_0", "rot_1", "rot_2", "rot_3",
-    ] {
-        h += &format!("property float {p}\n");
-    }
-    h += "end_header\n";
-    let mut out = h.into_bytes();
-    let stride = 9 + n_rest + 1 + 7;
-    out.reserve(s.len() * stride * 4);
-    let mut row = Vec::with_capacity(stride);
-    for i in 0..s.len() {
-        row.clear();
-        row.extend_from_slice(&s.means[i]);
-        row.extend_from_slice(&[0.0; 3]);
-        let sh = &s.sh[i * k * 3..(i + 1) * k * 3];
-        row.extend_from_slice(&sh[..3]);
+    let mut f_dc = Vec::with_capacity(s.len());
+    let mut f_rest = Vec::with_capacity(s.len() * 3 * (k - 1));
+    for sh in s.sh.chunks_exact(k * 3) {
+        f_dc.push([sh[0], sh[1], sh[2]]);
         for ch in 0..3 {
-            for c in 1..k {
-                row.push(sh[c * 3 + ch]);
-            }
-        }
-        row.push(s.opacity_logits[i]);
-        row.extend_from_slice(&s.log_scales[i]);
-        row.extend_from_slice(&s.rotations[i]);
-        for v in &row {
-            out.extend_from_slice(&v.to_le_bytes());
+            f_rest.extend((1..k).map(|c| sh[c * 3 + ch]));
         }
     }
-    Ok(out)
+    Ok(loader::ply::PlySplats {
+        means: s.means.clone(),
+        normals: None,
+        f_dc,
+        f_rest,
+        opacities: s.opacity_logits.clone(),
+        scales: s.log_scales.clone(),
+        rotations: s.rotations.clone(),
+        sh_degree: s.sh_degree,
+    })
 }
 
-/// Write splats as an INRIA PLY (atomically).
+/// Convert the loader's PLY arrays to [`Splats`] (normals are dropped).
+pub fn from_ply_splats(p: loader::ply::PlySplats) -> Splats {
+    let k = sh_coeffs(p.sh_degree);
+    let r = k - 1;
+    let mut sh = vec![0.0f32; p.len() * k * 3];
+    for (i, block) in sh.chunks_exact_mut(k * 3).enumerate() {
+        block[..3].copy_from_slice(&p.f_dc[i]);
+        let rest = &p.f_rest[i * 3 * r..(i + 1) * 3 * r];
+        for ch in 0..3 {
+            for c in 1..k {
+                block[c * 3 + ch] = rest[ch * r + c - 1];
+            }
+        }
+    }
+    Splats {
+        means: p.means,
+        log_scales: p.scales,
+        rotations: p.rotations,
+        opacity_logits: p.opacities,
+        sh,
+        sh_degree: p.sh_degree,
+    }
+}
+
+/// Encode splats as an INRIA PLY (binary little endian). Fails on NaN/Inf,
+/// naming the splat and the property.
+pub fn encode_ply(s: &Splats) -> Result<Vec<u8>> {
+    encode_ply_named(s, Path::new("<splats>"))
+}
+
+/// [`encode_ply`] with `path` named in errors.
+pub fn encode_ply_named(s: &Splats, path: &Path) -> Result<Vec<u8>> {
+    Ok(loader::ply::encode_ply(&to_ply_splats(s)?, path)?)
+}
+
+/// Write splats as an INRIA PLY (atomically). Refuses NaN/Inf, so what is
+/// written can always be read back.
 pub fn write_ply(path: impl AsRef<Path>, s: &Splats) -> Result<()> {
-    let bytes = encode_ply(s)?;
-    loader::io::write_bytes_atomic(path.as_ref(), &bytes)?;
+    let path = path.as_ref();
+    let bytes = encode_ply_named(s, path)?;
+    loader::io::write_bytes_atomic(path, &bytes)?;
     Ok(())
 }
 
-/// Read an INRIA-layout PLY (binary little endian; float or double properties).
+/// Read a splat PLY through the one PLY reader (`loader::ply`): binary
+/// little- or big-endian or ASCII, SH degree 0–3, any scalar property type;
+/// NaN/Inf rejected with the splat index and property.
 pub fn read_ply(path: impl AsRef<Path>) -> Result<Splats> {
-    let path = path.as_ref();
-    let bytes = std::fs::read(path).map_err(|e| ferr(path, e.to_string()))?;
-    decode_ply(&bytes).map_err(|m| ferr(path, m))
+    Ok(from_ply_splats(loader::ply::read_ply(path)?))
 }
 
-/// Decode an INRIA-layout PLY.
-pub fn decode_ply(bytes: &[u8]) -> std::result::Result<Splats, String> {
-    let end = bytes
-        .windows(11)
-        .position(|w| w == b"end_header\n")
-        .ok_or("no end_header")?
-        + 11;
-    let header = std::str::from_utf8(&bytes[..end]).map_err(|_| "header is not UTF-8")?;
-    let mut lines = header.lines();
-    if lines.next() != Some("ply") {
-        return Err("not a PLY file".into());
-    }
-    let mut n = None;
-    let mut props: Vec<(String, usize)> = Vec::new(); // (name, byte size)
-    let mut in_vertex = false;
-    for l in lines {
-        let t: Vec<&str> = l.split_whitespace().collect();
-        match t.as_slice() {
-            ["format", f, _] if *f != "binary_little_endian" => {
-                return Err(format!("unsupported PLY format {f}"));
-            }
-            ["element", "vertex", c] => {
-                n = Some(
-                    c.parse::<usize>()
-                        .map_err(|_| format!("bad vertex count {c}"))?,
-                );
-                in_vertex = true;
-            }
-            ["element", ..] => in_vertex = false,
-            ["property", ty, name] if in_vertex => {
-                let sz = match *ty {
-                    "float" | "float32" => 4,
-                    "double" | "float64" => 8,
-                    _ => return Err(format!("unsupported property type {ty} for {name}")),
-                };
-                props.push((name.to_string(), sz));
-            }
-            _ => {}
+/// Decode PLY bytes (see [`read_ply`]); `path` names them in errors.
+pub fn decode_ply(bytes: &[u8], path: &Path) -> Result<Splats> {
+    Ok(from_ply_splats(loader::ply::read_ply_bytes(bytes, path)?))
+}
+
+/// Read splats from any format we write, chosen by extension: `.ply`,
+/// `.spz`, `.splat` or `.glb` (the last two in the axes our exporter writes
+/// by default, converted back to COLMAP's). Non-finite values are rejected.
+pub fn read_splats(path: impl AsRef<Path>) -> Result<Splats> {
+    use crate::export::{ExportFormat, read_glb, read_splat, read_spz};
+    let path = path.as_ref();
+    let s = match ExportFormat::from_path(path) {
+        Some(ExportFormat::Ply) => return read_ply(path),
+        Some(ExportFormat::Spz) => read_spz(path, true)?.1,
+        Some(ExportFormat::Splat) => read_splat(path)?,
+        Some(ExportFormat::Glb) => read_glb(path)?,
+        None => {
+            return Err(ferr(
+                path,
+                "unknown splat file extension (expected .ply, .spz, .splat or .glb)",
+            ));
         }
-    }
-    let n = n.ok_or("no vertex element")?;
-    let stride: usize = props.iter().map(|p| p.1).sum();
-    let body = &bytes[end..];
-    if body.len() < n * stride {
-        return Err(format!(
-            "truncated: {} bytes for {n} vertices of {stride} bytes",
-            body.len()
-        ));
-    }
-    let mut offs = std::collections::HashMap::new();
-    let mut o = 0;
-    for (name, sz) in &props {
-        offs.insert(name.as_str(), (o, *sz));
-        o += sz;
-    }
-    let get = |i: usize, name: &str| -> std::result::Result<f32, String> {
-        let (off, sz) = *offs
-            .get(name)
-            .ok_or_else(|| format!("missing property {name}"))?;
-        let b = &body[i * stride + off..i * stride + off + sz];
-        Ok(if sz == 4 {
-            f32::from_le_bytes([b[0], b[1], b[2], b[3]])
-        } else {
-            f64::from_le_bytes([b[0], b[1], b[2], b[3], b[4], b[5], b[6], b[7]]) as f32
-        })
     };
-    let n_rest = props.iter().filter(|p| p.0.starts_with("f_rest_")).count();
-    let k = n_rest / 3 + 1;
-    let degree = (0..=3u32)
-        .find(|&d| sh_coeffs(d) == k && n_rest % 3 == 0)
-        .ok_or_else(|| format!("{n_rest} f_rest properties is not an SH degree ≤ 3"))?;
-    let mut s = Splats {
-        sh_degree: degree,
-        ..Default::default()
-    };
-    s.sh.reserve(n * k * 3);
-    for i in 0..n {
-        s.means.push([get(i, "x")?, get(i, "y")?, get(i, "z")?]);
-        s.log_scales
-            .push([get(i, "scale_0")?, get(i, "scale_1")?, get(i, "scale_2")?]);
-        s.rotations.push([
-            get(i, "rot_0")?,
-            get(i, "rot_1")?,
-            get(i, "rot_2")?,
-            get(i, "rot_3")?,
-        ]);
-        s.opacity_logits.push(get(i, "opacity")?);
-        let mut block = vec![0.0f32; k * 3];
-        for ch in 0..3 {
-            block[ch] = get(i, &format!("f_dc_{ch}"))?;
-            for c in 1..k {
-                block[c * 3 + ch] = get(i, &format!("f_rest_{}", ch * (k - 1) + c - 1))?;
-            }
-        }
-        s.sh.extend_from_slice(&block);
-    }
+    to_ply_splats(&s)?.validate(path)?;
     Ok(s)
 }
 
@@ -235,14 +175,15 @@ pub fn write_checkpoint(path: impl AsRef<Path>, c: &Checkpoint) -> Result<()> {
 /// Read a checkpoint written by [`write_checkpoint`].
 pub fn read_checkpoint(path: impl AsRef<Path>) -> Result<Checkpoint> {
     let path = path.as_ref();
-    let b = std::fs::read(path).map_err(|e| ferr(path, e.to_string()))?;
+    let b = loader::io::read_bytes(path)?;
     if b.len() < 16 || &b[..8] != CKPT_MAGIC {
         return Err(ferr(path, "not a romosplat checkpoint"));
     }
     let jl =
         u64::from_le_bytes(b[8..16].try_into().map_err(|_| ferr(path, "bad header"))?) as usize;
-    let js = b
-        .get(16..16 + jl)
+    let js = jl
+        .checked_add(16)
+        .and_then(|end| b.get(16..end))
         .ok_or_else(|| ferr(path, "truncated header"))?;
     let meta: CkptMeta =
         serde_json::from_slice(js).map_err(|e| ferr(path, format!("bad header: {e}")))?;
@@ -251,9 +192,11 @@ pub fn read_checkpoint(path: impl AsRef<Path>) -> Result<Checkpoint> {
     }
     let n = meta.splats;
     let k3 = sh_coeffs(meta.sh_degree) * 3;
-    let per = n * (3 + 3 + 4 + 1 + k3);
+    let per = n
+        .checked_mul(3 + 3 + 4 + 1 + k3)
+        .ok_or_else(|| ferr(path, format!("{n} splats is too many")))?;
     let body = &b[16 + jl..];
-    if body.len() != per * 3 * 4 {
+    if Some(body.len()) != per.checked_mul(3 * 4) {
         return Err(ferr(
             path,
             format!("size {} does not match {n} splats", body.len()),
@@ -314,7 +257,7 @@ mod tests {
         for deg in 0..=3 {
             let s = sample(deg);
             let b = encode_ply(&s).unwrap();
-            assert_eq!(decode_ply(&b).unwrap(), s);
+            assert_eq!(decode_ply(&b, Path::new("x.ply")).unwrap(), s);
         }
         // Channel-major f_rest: f_rest_0 is red coefficient 1, f_rest_15 is green coefficient 1.
         let s = sample(3);
@@ -324,8 +267,9 @@ mod tests {
         assert_eq!(f(9), s.sh[3]); // f_rest_0 = coeff 1 red
         assert_eq!(f(9 + 15), s.sh[4]); // f_rest_15 = coeff 1 green
         assert_eq!(f(9 + 45), s.opacity_logits[0]);
-        assert!(decode_ply(b"ply\nformat ascii 1.0\nend_header\n").is_err());
-        assert!(decode_ply(&b[..b.len() - 4]).is_err());
+        let p = Path::new("x.ply");
+        assert!(decode_ply(b"ply\nformat ascii 1.0\nend_header\n", p).is_err());
+        assert!(decode_ply(&b[..b.len() - 4], p).is_err());
     }
 
     #[test]

@@ -3,7 +3,6 @@
 //! cleaning it first (see `splat::export::clean`).
 
 use crate::Ctx;
-use anyhow::Context;
 use splat::export::{self, CleanOptions, ExportFormat, ExportOptions, SceneGeometry};
 use std::path::{Path, PathBuf};
 
@@ -34,10 +33,10 @@ impl From<Format> for ExportFormat {
 /// `romosplat export`
 #[derive(Debug, clap::Args)]
 pub struct Args {
-    /// Input splats: .ply (INRIA layout), .spz or .splat.
+    /// Input splats: .ply (INRIA layout), .spz, .splat or .glb.
     #[arg(long)]
     pub splats: PathBuf,
-    /// Output format; defaults to the extension of --out.
+    /// Output format; must match the extension of --out, which alone decides it when absent.
     #[arg(long, value_enum)]
     pub format: Option<Format>,
     /// Output file (written atomically).
@@ -76,18 +75,33 @@ pub struct Args {
     pub keep_axes: bool,
 }
 
-/// Read splats from .ply, .spz or .splat (by extension).
-fn read_input(path: &Path) -> anyhow::Result<splat::Splats> {
-    let ext = path
-        .extension()
-        .and_then(|e| e.to_str())
-        .unwrap_or("")
-        .to_ascii_lowercase();
-    Ok(match ext.as_str() {
-        "spz" => export::read_spz(path, true)?.1,
-        "splat" => export::read_splat(path)?,
-        _ => splat::io::read_ply(path)?,
-    })
+/// The output format: the extension of `out`, which `--format` (when
+/// given) must agree with, so every file we write is named for what it holds
+/// and `inspect` / `export --splats` can read it back.
+pub fn output_format(out: &Path, flag: Option<ExportFormat>) -> anyhow::Result<ExportFormat> {
+    let is_dir_like = out.as_os_str().to_string_lossy().ends_with('/') || out.is_dir();
+    if is_dir_like {
+        anyhow::bail!(
+            "{}: is a folder; --out takes a file path such as {}",
+            out.display(),
+            out.join("splats.spz").display()
+        );
+    }
+    match (ExportFormat::from_path(out), flag) {
+        (Some(ext), Some(f)) if ext != f => anyhow::bail!(
+            "{}: the extension says {ext} but --format is {f}; use a .{f} file name",
+            out.display()
+        ),
+        (Some(ext), _) => Ok(ext),
+        (None, Some(f)) => anyhow::bail!(
+            "{}: the file name must end in .{f} for --format {f}",
+            out.display()
+        ),
+        (None, None) => anyhow::bail!(
+            "{}: unknown extension (expected .ply, .splat, .glb or .spz)",
+            out.display()
+        ),
+    }
 }
 
 /// Training cameras and static points of `--scene`: a scene folder (poses
@@ -107,16 +121,8 @@ fn scene_geometry(dir: &Path) -> anyhow::Result<SceneGeometry> {
 
 /// Run `romosplat export`.
 pub fn run(args: &Args, ctx: &Ctx) -> anyhow::Result<serde_json::Value> {
-    let format: ExportFormat = match args.format {
-        Some(f) => f.into(),
-        None => ExportFormat::from_path(&args.out).with_context(|| {
-            format!(
-                "{}: cannot tell the format from the extension; pass --format",
-                args.out.display()
-            )
-        })?,
-    };
-    let mut splats = read_input(&args.splats)?;
+    let format = output_format(&args.out, args.format.map(ExportFormat::from))?;
+    let mut splats = splat::io::read_splats(&args.splats)?;
     ctx.info(format!(
         "read {} splats (SH degree {}) from {}",
         splats.len(),

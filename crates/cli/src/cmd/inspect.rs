@@ -1,5 +1,6 @@
 //! `romosplat inspect PATH`: summarise a scene folder, a COLMAP model, a
-//! transforms.json or a splat PLY (see `loader::inspect`).
+//! transforms.json or a splat file (see `loader::inspect`; `.spz`, `.splat`
+//! and `.glb` are read with the splat crate's readers, the ones `export` uses).
 
 use crate::Ctx;
 use std::path::PathBuf;
@@ -7,13 +8,26 @@ use std::path::PathBuf;
 /// `romosplat inspect PATH`
 #[derive(Debug, clap::Args)]
 pub struct Args {
-    /// A scene folder, a COLMAP model folder (or one holding sparse/0), a transforms.json or a .ply.
+    /// A scene folder, a COLMAP model folder (or one holding sparse/0), a
+    /// transforms.json or splats (.ply, .spz, .splat, .glb).
     pub path: PathBuf,
 }
 
 /// Run `romosplat inspect`.
 pub fn run(args: &Args, ctx: &Ctx) -> anyhow::Result<serde_json::Value> {
-    let r = loader::inspect::inspect(&args.path)?;
+    let r = match splat::export::ExportFormat::from_path(&args.path) {
+        Some(f) if f != splat::export::ExportFormat::Ply && args.path.is_file() => {
+            let s = splat::io::read_splats(&args.path)?;
+            loader::inspect::InspectReport {
+                kind: f.name().into(),
+                path: args.path.display().to_string(),
+                splats: Some(s.len()),
+                sh_degree: Some(s.sh_degree),
+                ..Default::default()
+            }
+        }
+        _ => loader::inspect::inspect(&args.path)?,
+    };
     ctx.info(format!("{}: {}", r.kind, r.path));
     if let Some(n) = r.images {
         ctx.info(format!("  images: {n}"));

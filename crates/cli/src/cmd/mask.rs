@@ -155,9 +155,11 @@ pub fn run(args: &Args, ctx: &Ctx) -> anyhow::Result<serde_json::Value> {
     if let Some(m) = &args.onnx_features {
         opts.features = romo::FeatureBackend::Onnx { model: m.clone() };
     }
-    if args.out.is_some() {
-        opts.out = args.out.clone();
-    }
+    // Masks (and overlays, probabilities) are staged and moved into place
+    // together: a failure leaves no partial set behind.
+    let out = args.out.clone().unwrap_or_else(|| args.scene.clone());
+    let stage = loader::io::Staging::new(&out)?;
+    opts.out = Some(stage.path().to_path_buf());
     ctx.info(format!(
         "romo: {} frames from {}",
         scene.frames.len(),
@@ -170,6 +172,9 @@ pub fn run(args: &Args, ctx: &Ctx) -> anyhow::Result<serde_json::Value> {
         pb.set_position(done as u64);
     })?;
     pb.finish_and_clear();
+    stage.commit()?;
+    let mut report = report;
+    report.masks_dir = Some(out.join("masks"));
     let moving: f32 = report.frames.iter().map(|f| f.moving_fraction).sum::<f32>()
         / report.frames.len().max(1) as f32;
     ctx.info(format!(

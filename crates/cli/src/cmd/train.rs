@@ -310,8 +310,9 @@ pub fn run(args: &Args, ctx: &Ctx) -> anyhow::Result<serde_json::Value> {
             (fresh_start(s), Some(rep))
         }
     };
-    std::fs::create_dir_all(&args.out)
-        .with_context(|| format!("creating {}", args.out.display()))?;
+    // Outputs (checkpoints, splats.ply, summary.json) are staged and moved
+    // into --out together at the end: a failed run leaves --out untouched.
+    let stage = loader::io::Staging::new(&args.out)?;
     let mut backend = make_train_backend(args.backend, args.sparse_adam, ctx)?;
     let pb = ctx.progress(opts.steps as u64, "train");
     pb.set_position(start.step as u64);
@@ -319,7 +320,7 @@ pub fn run(args: &Args, ctx: &Ctx) -> anyhow::Result<serde_json::Value> {
         backend: backend.as_mut(),
         data: &data,
         opts: opts.clone(),
-        checkpoint_dir: Some(args.out.clone()),
+        checkpoint_dir: Some(stage.path().to_path_buf()),
     };
     let every = (opts.steps / 100).max(1);
     let mut history: Vec<serde_json::Value> = Vec::new();
@@ -337,7 +338,7 @@ pub fn run(args: &Args, ctx: &Ctx) -> anyhow::Result<serde_json::Value> {
     })?;
     pb.finish_and_clear();
     let ply = args.out.join("splats.ply");
-    write_ply(&ply, &end.splats)?;
+    write_ply(stage.path().join("splats.ply"), &end.splats)?;
     ctx.info(format!(
         "trained {} steps in {:.1} s ({:.2} steps/s), {} splats, train PSNR {:.2} → {}",
         rep.steps - rep.start_step,
@@ -379,8 +380,9 @@ pub fn run(args: &Args, ctx: &Ctx) -> anyhow::Result<serde_json::Value> {
         "options": opts,
     });
     loader::io::write_bytes_atomic(
-        args.out.join("summary.json"),
+        stage.path().join("summary.json"),
         serde_json::to_string_pretty(&summary)?.as_bytes(),
     )?;
+    stage.commit()?;
     Ok(summary)
 }

@@ -255,7 +255,7 @@ pub fn read_model_binary(dir: impl AsRef<Path>) -> Result<ColmapModel> {
     let (cameras, co) = read_cameras(&model_file(dir, "cameras.bin")?)?;
     let (images, io) = read_images(&model_file(dir, "images.bin")?)?;
     let (points3d, po) = read_points(&model_file(dir, "points3D.bin")?)?;
-    Ok(ColmapModel {
+    let model = ColmapModel {
         cameras,
         images,
         points3d,
@@ -264,7 +264,9 @@ pub fn read_model_binary(dir: impl AsRef<Path>) -> Result<ColmapModel> {
             images: io,
             points3d: po,
         },
-    })
+    };
+    model.validate_files(dir, Some("bin"))?;
+    Ok(model)
 }
 
 /// Encode `cameras.bin`.
@@ -333,7 +335,7 @@ pub(crate) fn encode_points(m: &ColmapModel, out: &mut Vec<u8>) {
 /// first (camera parameter counts, image cameras exist).
 pub fn write_model_binary(model: &ColmapModel, dir: impl AsRef<Path>) -> Result<()> {
     let dir = dir.as_ref();
-    model.validate(dir)?;
+    model.validate_files(dir, Some("bin"))?;
     type Enc = fn(&ColmapModel, &mut Vec<u8>);
     let files: [(&str, Enc); 3] = [
         ("cameras.bin", encode_cameras),

@@ -114,52 +114,78 @@ impl ColmapModel {
         self.images.values().find(|im| im.name == name)
     }
 
-    /// Check internal consistency: map keys equal ids, every image's camera
-    /// exists, camera parameter counts match their models. `path` names the
-    /// model in the error.
-    pub fn validate(&self, path: &Path) -> Result<()> {
+    /// Check the model is usable, naming the file (`dir/cameras.bin`, ...)
+    /// and the record in errors: map keys equal ids; cameras have a size,
+    /// the right parameter count, finite parameters and focal lengths > 0;
+    /// every image's camera exists and its pose is finite with a
+    /// quaternion that can be normalised; 3D points are finite.
+    pub fn validate(&self, dir: &Path) -> Result<()> {
+        let ext = match detect_format(dir) {
+            Some(ModelFormat::Binary) => Some("bin"),
+            Some(ModelFormat::Text) => Some("txt"),
+            None => None,
+        };
+        self.validate_files(dir, ext)
+    }
+
+    /// [`ColmapModel::validate`] naming `dir/<file>.<ext>` (or `dir` alone).
+    pub(crate) fn validate_files(&self, dir: &Path, ext: Option<&str>) -> Result<()> {
+        let file = |stem: &str| match ext {
+            Some(e) => dir.join(format!("{stem}.{e}")),
+            None => dir.to_path_buf(),
+        };
         for (k, c) in &self.cameras {
+            let bad =
+                |msg: String| LoaderError::format(file("cameras"), format!("camera {k}: {msg}"));
             if *k != c.id {
-                return Err(LoaderError::format(
-                    path,
-                    format!("camera key {k} != camera id {}", c.id),
-                ));
+                return Err(bad(format!("key != camera id {}", c.id)));
             }
             if c.params.len() != c.model.num_params() {
-                return Err(LoaderError::format(
-                    path,
-                    format!(
-                        "camera {k}: model {} needs {} params, has {}",
-                        c.model.name(),
-                        c.model.num_params(),
-                        c.params.len()
-                    ),
-                ));
+                return Err(bad(format!(
+                    "model {} needs {} params, has {}",
+                    c.model.name(),
+                    c.model.num_params(),
+                    c.params.len()
+                )));
+            }
+            if c.width == 0
+                || c.height == 0
+                || c.width > u32::MAX as u64
+                || c.height > u32::MAX as u64
+            {
+                return Err(bad(format!(
+                    "image size {}x{} is not usable",
+                    c.width, c.height
+                )));
+            }
+            if let Some(v) = c.params.iter().find(|v| !v.is_finite()) {
+                return Err(bad(format!("parameter {v} is not finite")));
+            }
+            let (fx, fy) = c.focal();
+            if fx <= 0.0 || fy <= 0.0 {
+                return Err(bad(format!("focal length {fx}, {fy} is not > 0")));
             }
         }
         for (k, im) in &self.images {
+            let bad = |msg: String| {
+                LoaderError::format(file("images"), format!("image {k} ({}): {msg}", im.name))
+            };
             if *k != im.id {
-                return Err(LoaderError::format(
-                    path,
-                    format!("image key {k} != image id {}", im.id),
-                ));
+                return Err(bad(format!("key != image id {}", im.id)));
             }
             if !self.cameras.contains_key(&im.camera_id) {
-                return Err(LoaderError::format(
-                    path,
-                    format!(
-                        "image {} ({}) refers to missing camera {}",
-                        im.id, im.name, im.camera_id
-                    ),
-                ));
+                return Err(bad(format!("refers to missing camera {}", im.camera_id)));
             }
+            check_pose(&im.pose).map_err(bad)?;
         }
         for (k, p) in &self.points3d {
+            let bad =
+                |msg: String| LoaderError::format(file("points3D"), format!("point {k}: {msg}"));
             if *k != p.id {
-                return Err(LoaderError::format(
-                    path,
-                    format!("point3D key {k} != point id {}", p.id),
-                ));
+                return Err(bad(format!("key != point id {}", p.id)));
+            }
+            if p.xyz.iter().any(|v| !v.is_finite()) {
+                return Err(bad(format!("position {:?} is not finite", p.xyz)));
             }
         }
         Ok(())
@@ -187,6 +213,23 @@ fn ordered<K: Ord + Copy, V>(order: &[K], map: &BTreeMap<K, V>) -> Vec<K> {
         }
     }
     map.keys().copied().collect()
+}
+
+/// Check a world-to-camera pose: finite, with a quaternion whose norm is
+/// far enough from 0 to normalise (COLMAP normalises on read; a zero or
+/// NaN quaternion has no rotation).
+pub fn check_pose(p: &Pose) -> std::result::Result<(), String> {
+    let n = p.qvec.iter().map(|v| v * v).sum::<f64>().sqrt();
+    if !n.is_finite() || n < 1e-6 {
+        return Err(format!(
+            "quaternion {:?} cannot be normalised to a rotation",
+            p.qvec
+        ));
+    }
+    if p.tvec.iter().any(|v| !v.is_finite()) {
+        return Err(format!("translation {:?} is not finite", p.tvec));
+    }
+    Ok(())
 }
 
 /// Which form `dir` holds: binary when `cameras.bin` exists, text when
@@ -349,6 +392,72 @@ mod tests {
         std::fs::remove_file(dir.path().join("points3D.bin")).unwrap();
         let e = read_model(dir.path()).unwrap_err().to_string();
         assert!(e.contains("points3D.bin") && e.contains("not found"), "{e}");
+    }
+
+    /// Every unusable record is refused at read time, naming the file and
+    /// the record (the trainer used to accept them and train on garbage).
+    #[test]
+    fn unusable_records_are_refused_naming_file_and_record() {
+        let dir = tempfile::tempdir().unwrap();
+        type Edit = fn(&mut ColmapModel);
+        let cases: [(Edit, &str, &str); 6] = [
+            (
+                |m| m.images.get_mut(&2).unwrap().pose.qvec = [0.0; 4],
+                "images.bin",
+                "image 2 (frame_0002.jpg): quaternion",
+            ),
+            (
+                |m| m.images.get_mut(&2).unwrap().pose.qvec[1] = f64::NAN,
+                "images.bin",
+                "cannot be normalised",
+            ),
+            (
+                |m| m.images.get_mut(&3).unwrap().camera_id = 42,
+                "images.bin",
+                "missing camera 42",
+            ),
+            (
+                |m| m.cameras.get_mut(&1).unwrap().width = 0,
+                "cameras.bin",
+                "camera 1: image size 0x480",
+            ),
+            (
+                |m| m.cameras.get_mut(&2).unwrap().params[0] = f64::NAN,
+                "cameras.bin",
+                "camera 2: parameter NaN",
+            ),
+            (
+                |m| m.points3d.get_mut(&7).unwrap().xyz[0] = f64::INFINITY,
+                "points3D.bin",
+                "point 7: position",
+            ),
+        ];
+        for (k, (edit, file, want)) in cases.iter().enumerate() {
+            let mut m = testutil::sample_model();
+            edit(&mut m);
+            // Written by hand (the writer refuses), then read.
+            let d = dir.path().join(format!("m{k}"));
+            std::fs::create_dir_all(&d).unwrap();
+            let mut ok = testutil::sample_model();
+            ok.file_order = Default::default();
+            write_model_binary(&ok, &d).unwrap();
+            assert!(
+                write_model_binary(&m, &d).is_err(),
+                "writer accepted case {k}"
+            );
+            let mut bytes = Vec::new();
+            match *file {
+                "cameras.bin" => binary::encode_cameras(&m, &mut bytes),
+                "images.bin" => binary::encode_images(&m, &mut bytes),
+                _ => binary::encode_points(&m, &mut bytes),
+            }
+            std::fs::write(d.join(file), &bytes).unwrap();
+            let e = read_model(&d).unwrap_err().to_string();
+            assert!(
+                e.contains(&format!("m{k}/{file}")) && e.contains(want),
+                "{e} (wanted {want})"
+            );
+        }
     }
 
     #[test]

@@ -214,7 +214,7 @@ pub fn read_model_text(dir: impl AsRef<Path>) -> Result<ColmapModel> {
     let (cameras, co) = read_cameras(&model_file(dir, "cameras.txt")?)?;
     let (images, io) = read_images(&model_file(dir, "images.txt")?)?;
     let (points3d, po) = read_points(&model_file(dir, "points3D.txt")?)?;
-    Ok(ColmapModel {
+    let model = ColmapModel {
         cameras,
         images,
         points3d,
@@ -223,7 +223,9 @@ pub fn read_model_text(dir: impl AsRef<Path>) -> Result<ColmapModel> {
             images: io,
             points3d: po,
         },
-    })
+    };
+    model.validate_files(dir, Some("txt"))?;
+    Ok(model)
 }
 
 fn cameras_text(m: &ColmapModel) -> String {
@@ -312,7 +314,7 @@ fn points_text(m: &ColmapModel) -> String {
 /// (created if needed; each file written atomically).
 pub fn write_model_text(model: &ColmapModel, dir: impl AsRef<Path>) -> Result<()> {
     let dir = dir.as_ref();
-    model.validate(dir)?;
+    model.validate_files(dir, Some("txt"))?;
     for (name, text) in [
         ("cameras.txt", cameras_text(model)),
         ("images.txt", images_text(model)),

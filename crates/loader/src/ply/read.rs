@@ -451,7 +451,7 @@ fn decode_ascii(
         .map_err(|_| LoaderError::format(path, "ASCII PLY data is not text"))?;
     let mut tok = text.split_ascii_whitespace();
     let mut next = |what: &str| tok.next().ok_or_else(|| truncated(path, what));
-    for el in before {
+    for el in before.iter().filter(|e| !e.props.is_empty()) {
         for _ in 0..el.count {
             for p in &el.props {
                 let cnt = match p.list {
@@ -466,10 +466,15 @@ fn decode_ascii(
             }
         }
     }
-    let mut out = Vec::with_capacity(vertex.count * vertex.props.len());
+    // Every value takes at least two bytes (a digit and a separator), so the
+    // file's size, not the header's count, bounds the allocation.
+    let values = vertex.count.saturating_mul(vertex.props.len());
+    let mut out = Vec::with_capacity(values.min(data.len() / 2 + 1));
     for i in 0..vertex.count {
         for p in &vertex.props {
-            let t = next(&format!("vertex {i} of {}", vertex.count))?;
+            let t = tok
+                .next()
+                .ok_or_else(|| truncated(path, &format!("vertex {i} of {}", vertex.count)))?;
             let v: f64 = t.parse().map_err(|_| {
                 LoaderError::format(path, format!("vertex {i}: bad value {t:?} for {}", p.name))
             })?;

@@ -206,3 +206,36 @@ fn point_cloud_ply_is_readable_header() {
         4.0
     );
 }
+
+/// Headers that claim far more data than the file holds give an error, and
+/// nothing is allocated for the claimed count (a 10^12-vertex ASCII header
+/// used to ask for 248 TB and abort).
+#[test]
+fn huge_header_counts_are_bounded_by_the_file() {
+    let one = "1 2 3 0 0 1 0.5 0.25 0.125 0 -1 -1.5 -0.5 1 0 0 0";
+    let ascii = ascii_ply(&[one]).replace("element vertex 1\n", "element vertex 1000000000000\n");
+    let e = read_ply_bytes(ascii.as_bytes(), Path::new("huge.ply"))
+        .unwrap_err()
+        .to_string();
+    assert!(e.contains("huge.ply") && e.contains("truncated"), "{e}");
+    let good = encode_ply(&sample(2, 0), Path::new("x.ply")).unwrap();
+    let text = String::from_utf8_lossy(&good).replace(
+        "element vertex 2\n",
+        "element vertex 18446744073709551615\n",
+    );
+    let e = read_ply_bytes(text.as_bytes(), Path::new("huge.ply"))
+        .unwrap_err()
+        .to_string();
+    assert!(e.contains("huge.ply") && e.contains("truncated"), "{e}");
+    // A property-less element with an absurd count before the vertices.
+    let skip = ascii_ply(&[one]).replace(
+        "element vertex 1\n",
+        "element junk 18446744073709551615\nelement vertex 1\n",
+    );
+    assert_eq!(
+        read_ply_bytes(skip.as_bytes(), Path::new("s.ply"))
+            .unwrap()
+            .len(),
+        1
+    );
+}

@@ -284,9 +284,9 @@ impl SceneSpec {
 /// Read and validate a scene spec; errors name the file.
 pub fn load_spec(path: impl AsRef<Path>) -> Result<SceneSpec> {
     let path = path.as_ref();
-    let text = std::fs::read_to_string(path).map_err(|e| LoaderError::io(path, e))?;
-    let spec: SceneSpec = toml::from_str(&text)
-        .map_err(|e| LoaderError::format(path, e.to_string().replace('\n', " ")))?;
+    let text = crate::io::read_string(path)?;
+    let spec: SceneSpec =
+        toml::from_str(&text).map_err(|e| crate::error::toml_error(path, &text, &e))?;
     spec.validate()
         .map_err(|e| LoaderError::format(path, e.to_string()))?;
     Ok(spec)

@@ -376,6 +376,161 @@ pub fn parse_glb(bytes: &[u8]) -> Result<Glb> {
     Ok(Glb { json, bin })
 }
 
+/// The f32 data of accessor `idx` (tightly packed or strided, in the BIN
+/// chunk), `dims` components per element. Sizes are checked against the
+/// buffer view before anything is allocated.
+fn read_f32_accessor(glb: &Glb, idx: usize, dims: usize, what: &str) -> Result<Vec<f32>> {
+    let bad = |m: String| SplatError::Invalid(format!("glb: {what}: {m}"));
+    let acc = glb
+        .json
+        .pointer(&format!("/accessors/{idx}"))
+        .ok_or_else(|| bad(format!("accessor {idx} does not exist")))?;
+    let field = |v: &Value, k: &str| v.get(k).and_then(Value::as_u64).map(|x| x as usize);
+    if field(acc, "componentType") != Some(5126) {
+        return Err(bad("component type is not FLOAT".into()));
+    }
+    let want_ty = match dims {
+        1 => "SCALAR",
+        3 => "VEC3",
+        _ => "VEC4",
+    };
+    if acc.get("type").and_then(Value::as_str) != Some(want_ty) {
+        return Err(bad(format!("accessor type is not {want_ty}")));
+    }
+    let count = field(acc, "count").ok_or_else(|| bad("accessor has no count".into()))?;
+    let view_idx =
+        field(acc, "bufferView").ok_or_else(|| bad("accessor has no bufferView".into()))?;
+    let view = glb
+        .json
+        .pointer(&format!("/bufferViews/{view_idx}"))
+        .ok_or_else(|| bad(format!("bufferView {view_idx} does not exist")))?;
+    if field(view, "buffer") != Some(0) {
+        return Err(bad(
+            "data outside the GLB's BIN chunk is not supported".into()
+        ));
+    }
+    let view_off = field(view, "byteOffset").unwrap_or(0);
+    let view_len =
+        field(view, "byteLength").ok_or_else(|| bad("bufferView has no byteLength".into()))?;
+    let elem = 4 * dims;
+    let stride = field(view, "byteStride").unwrap_or(elem);
+    if stride < elem {
+        return Err(bad(format!("byteStride {stride} < element size {elem}")));
+    }
+    let view_bytes = view_off
+        .checked_add(view_len)
+        .and_then(|end| glb.bin.get(view_off..end))
+        .ok_or_else(|| bad("bufferView runs past the BIN chunk".into()))?;
+    let acc_off = field(acc, "byteOffset").unwrap_or(0);
+    let needed = match count {
+        0 => Some(0),
+        c => (c - 1)
+            .checked_mul(stride)
+            .and_then(|x| x.checked_add(elem))
+            .and_then(|x| x.checked_add(acc_off)),
+    };
+    if needed.is_none_or(|n| n > view_bytes.len()) {
+        return Err(bad(format!(
+            "{count} elements do not fit the {}-byte bufferView",
+            view_bytes.len()
+        )));
+    }
+    let data = &view_bytes[acc_off..];
+    let mut out = Vec::with_capacity(count * dims);
+    for i in 0..count {
+        let e = &data[i * stride..i * stride + elem];
+        out.extend(
+            e.chunks_exact(4)
+                .map(|b| f32::from_le_bytes([b[0], b[1], b[2], b[3]])),
+        );
+    }
+    Ok(out)
+}
+
+/// Decode the splats of a `KHR_gaussian_splatting` .glb (the first mesh
+/// primitive): position, rotation, linear scale, opacity and the
+/// `SH_DEGREE_l_COEF_n` coefficients (degree 0 required). `from_gltf_axes`
+/// undoes [`GlbOptions::to_gltf_axes`]. Values are not range-checked here;
+/// a zero scale decodes to a log scale of −∞, which callers reject.
+pub fn decode_glb(bytes: &[u8], from_gltf_axes: bool) -> Result<Splats> {
+    let glb = parse_glb(bytes)?;
+    let attrs = glb
+        .json
+        .pointer("/meshes/0/primitives/0/attributes")
+        .and_then(Value::as_object)
+        .ok_or_else(|| SplatError::Invalid("glb: no mesh primitive".into()))?;
+    let get = |name: &str, dims: usize| -> Result<Vec<f32>> {
+        let idx = attrs
+            .get(name)
+            .and_then(Value::as_u64)
+            .ok_or_else(|| SplatError::Invalid(format!("glb: no attribute {name}")))?;
+        read_f32_accessor(&glb, idx as usize, dims, name)
+    };
+    let pos = get("POSITION", 3)?;
+    let n = pos.len() / 3;
+    let rot = get(&format!("{EXTENSION}:ROTATION"), 4)?;
+    let scale = get(&format!("{EXTENSION}:SCALE"), 3)?;
+    let opacity = get(&format!("{EXTENSION}:OPACITY"), 1)?;
+    let degree = (0..=3u32)
+        .take_while(|l| attrs.contains_key(&sh_attribute(*l, 0)))
+        .last()
+        .ok_or_else(|| SplatError::Invalid(format!("glb: no attribute {}", sh_attribute(0, 0))))?;
+    let k = crate::types::sh_coeffs(degree);
+    let mut coefs = Vec::with_capacity(k);
+    for l in 0..=degree {
+        for m in 0..(2 * l + 1) {
+            coefs.push(get(&sh_attribute(l, m), 3)?);
+        }
+    }
+    for (name, len) in [
+        ("ROTATION", rot.len() / 4),
+        ("SCALE", scale.len() / 3),
+        ("OPACITY", opacity.len()),
+    ]
+    .into_iter()
+    .chain(coefs.iter().map(|c| ("SH", c.len() / 3)))
+    {
+        if len != n {
+            return Err(SplatError::Invalid(format!(
+                "glb: {name} has {len} elements for {n} positions"
+            )));
+        }
+    }
+    let mut sh = vec![0.0f32; n * k * 3];
+    for (i, block) in sh.chunks_exact_mut(k * 3).enumerate() {
+        for (j, c) in coefs.iter().enumerate() {
+            block[j * 3..j * 3 + 3].copy_from_slice(&c[i * 3..i * 3 + 3]);
+        }
+    }
+    let s = Splats {
+        means: pos.chunks_exact(3).map(|c| [c[0], c[1], c[2]]).collect(),
+        log_scales: scale
+            .chunks_exact(3)
+            .map(|c| [c[0].ln(), c[1].ln(), c[2].ln()])
+            .collect(),
+        rotations: rot
+            .chunks_exact(4)
+            .map(|c| [c[3], c[0], c[1], c[2]])
+            .collect(),
+        opacity_logits: opacity
+            .iter()
+            .map(|&o| {
+                let p = o.clamp(1e-6, 1.0 - 1e-6);
+                (p / (1.0 - p)).ln()
+            })
+            .collect(),
+        sh,
+        sh_degree: degree,
+    };
+    Ok(if from_gltf_axes { rdf_to_rub(&s) } else { s })
+}
+
+/// Read a .glb written with the default [`GlbOptions`] (glTF axes).
+pub fn read_glb(path: &Path) -> Result<Splats> {
+    let bytes = loader::io::read_bytes(path)?;
+    decode_glb(&bytes, true).map_err(|e| super::name_file(path, e))
+}
+
 /// Write the .glb atomically; returns its size in bytes.
 pub fn write_glb(path: &Path, s: &Splats, opts: &GlbOptions) -> Result<u64> {
     let bytes = encode_glb(s, opts).map_err(|e| super::name_file(path, e))?;

@@ -20,7 +20,7 @@ pub mod web_splat;
 pub(crate) mod test_data;
 
 pub use clean::{CleanOptions, CleanReport, SceneGeometry, clean};
-pub use glb::{GlbOptions, encode_glb, parse_glb, write_glb};
+pub use glb::{GlbOptions, decode_glb, encode_glb, parse_glb, read_glb, write_glb};
 pub use spz::{SpzOptions, decode_spz, encode_spz, read_spz, write_spz};
 pub use web_splat::{decode_splat, encode_splat, read_splat, write_splat};
 
@@ -196,29 +196,78 @@ pub struct ExportSummary {
     pub sh_degree: u32,
 }
 
-/// Write `s` to `path` in `format` (atomically).
+/// Encode `s` in `format` and decode the bytes again with the reader
+/// `inspect` and `export` use, so nothing is written that cannot be read
+/// back (e.g. a log scale whose `exp` overflows the linear scales of
+/// `.splat` and `.glb`). Returns the bytes and the SH degree stored.
+pub fn encode_checked(
+    s: &Splats,
+    format: ExportFormat,
+    path: &Path,
+    opts: &ExportOptions,
+) -> Result<(Vec<u8>, u32)> {
+    opts.validate()?;
+    let named = |e| name_file(path, e);
+    let (bytes, back) = match format {
+        ExportFormat::Ply => {
+            let b = crate::io::encode_ply_named(s, path)?;
+            let back = crate::io::decode_ply(&b, path)?;
+            (b, back)
+        }
+        ExportFormat::Splat => {
+            let b = encode_splat(s).map_err(named)?;
+            let back = decode_splat(&b).map_err(named)?;
+            (b, back)
+        }
+        ExportFormat::Glb => {
+            let b = encode_glb(s, &opts.glb).map_err(named)?;
+            let back = decode_glb(&b, opts.glb.to_gltf_axes).map_err(named)?;
+            (b, back)
+        }
+        ExportFormat::Spz => {
+            let b = encode_spz(s, &opts.spz).map_err(named)?;
+            let back = decode_spz(&b, opts.spz.convert_axes).map_err(named)?.1;
+            (b, back)
+        }
+    };
+    if back.len() != s.len() {
+        return Err(SplatError::File {
+            path: path.to_path_buf(),
+            msg: format!(
+                "{format} encoding holds {} splats, not {}",
+                back.len(),
+                s.len()
+            ),
+        });
+    }
+    if let Err(e) = crate::io::to_ply_splats(&back)?.validate(path) {
+        let why = match e {
+            loader::LoaderError::Format { msg, .. } => msg,
+            other => other.to_string(),
+        };
+        return Err(SplatError::File {
+            path: path.to_path_buf(),
+            msg: format!("not written: as {format} it would not read back ({why})"),
+        });
+    }
+    Ok((bytes, back.sh_degree))
+}
+
+/// Write `s` to `path` in `format` (atomically), after checking that the
+/// encoded bytes read back ([`encode_checked`]).
 pub fn export(
     s: &Splats,
     format: ExportFormat,
     path: &Path,
     opts: &ExportOptions,
 ) -> Result<ExportSummary> {
-    opts.validate()?;
-    let (bytes, sh_degree) = match format {
-        ExportFormat::Ply => {
-            let bytes = crate::io::encode_ply(s).map_err(|e| name_file(path, e))?;
-            loader::io::write_bytes_atomic(path, &bytes)?;
-            (bytes.len() as u64, s.sh_degree)
-        }
-        ExportFormat::Splat => (write_splat(path, s)?, 0),
-        ExportFormat::Glb => (write_glb(path, s, &opts.glb)?, s.sh_degree),
-        ExportFormat::Spz => (write_spz(path, s, &opts.spz)?, s.sh_degree),
-    };
+    let (bytes, sh_degree) = encode_checked(s, format, path, opts)?;
+    loader::io::write_bytes_atomic(path, &bytes)?;
     Ok(ExportSummary {
         format,
         path: path.to_path_buf(),
         splats: s.len(),
-        bytes,
+        bytes: bytes.len() as u64,
         sh_degree,
     })
 }

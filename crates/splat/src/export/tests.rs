@@ -175,3 +175,63 @@ fn write_samples_of_every_format_and_read_them_back() {
     assert!(leftovers.is_empty(), "{leftovers:?}");
     eprintln!("export samples ({SAMPLE_SPLATS} splats, SH degree 3): {sizes:?}");
 }
+
+/// Every exported format reads back through `read_splats` (the reader
+/// `inspect` and `export --splats` use), .glb close to the original.
+#[test]
+fn read_splats_reads_every_format() {
+    let dir = tempfile::tempdir().unwrap();
+    let s = random_splats(64, 2, 7);
+    for f in ExportFormat::ALL {
+        let p = dir.path().join(format!("s.{}", f.name()));
+        export(&s, f, &p, &ExportOptions::default()).unwrap();
+        let back = crate::io::read_splats(&p).unwrap();
+        assert_eq!(back.len(), s.len(), "{f}");
+        assert_eq!(back.sh_degree, if f == ExportFormat::Splat { 0 } else { 2 });
+    }
+    let glb = crate::io::read_splats(dir.path().join("s.glb")).unwrap();
+    for i in 0..s.len() {
+        for a in 0..3 {
+            assert!((glb.means[i][a] - s.means[i][a]).abs() < 1e-6);
+            assert!((glb.log_scales[i][a] - s.log_scales[i][a]).abs() < 1e-4);
+        }
+        assert!((glb.opacity_logits[i] - s.opacity_logits[i]).abs() < 1e-2);
+    }
+    assert_eq!(&glb.sh[..27], &s.sh[..27]);
+    let e = crate::io::read_splats(dir.path().join("s.obj"))
+        .unwrap_err()
+        .to_string();
+    assert!(e.contains("s.obj") && e.contains("extension"), "{e}");
+}
+
+/// A splat whose linear scale overflows f32 would be written as `inf` by
+/// the .splat and .glb encoders; the export refuses before writing.
+#[test]
+fn export_refuses_what_would_not_read_back() {
+    let dir = tempfile::tempdir().unwrap();
+    let mut s = random_splats(5, 0, 3);
+    s.log_scales[3][1] = 120.0;
+    for f in [ExportFormat::Splat, ExportFormat::Glb] {
+        let p = dir.path().join(format!("big.{}", f.name()));
+        let e = export(&s, f, &p, &ExportOptions::default())
+            .unwrap_err()
+            .to_string();
+        assert!(
+            e.contains("big.") && e.contains("scale_1") && e.contains("would not read back"),
+            "{e}"
+        );
+        assert!(!p.exists(), "{f} written");
+    }
+    // NaN is refused by every format, naming the splat and property for PLY.
+    s.log_scales[3][1] = 0.0;
+    s.means[1][2] = f32::NAN;
+    let p = dir.path().join("nan.ply");
+    let e = export(&s, ExportFormat::Ply, &p, &ExportOptions::default())
+        .unwrap_err()
+        .to_string();
+    assert!(
+        e.contains("nan.ply") && e.contains("splat 1") && e.contains("property z"),
+        "{e}"
+    );
+    assert!(!p.exists());
+}

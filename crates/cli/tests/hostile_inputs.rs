@@ -1,0 +1,321 @@
+//! The hostile-input table of the reliability issue, through the binary:
+//! every bad input gives exit code 1 and one line naming the file and the
+//! problem, never a panic, an abort, a silently accepted scene or a partly
+//! written output.
+#![allow(clippy::unwrap_used, clippy::expect_used)]
+
+use loader::camera::{Camera, CameraModel, Pose};
+use loader::colmap::{ColmapImage, ColmapModel, Point3D, write_model_binary};
+use std::path::{Path, PathBuf};
+use std::process::Command;
+
+/// Run the binary; returns (exit code, stderr).
+fn romosplat(args: &[&str]) -> (i32, String) {
+    let out = Command::new(env!("CARGO_BIN_EXE_romosplat"))
+        .args(args)
+        .arg("--quiet")
+        .env("XDG_RUNTIME_DIR", std::env::temp_dir())
+        .output()
+        .unwrap();
+    (
+        out.status.code().unwrap_or(-1),
+        String::from_utf8_lossy(&out.stderr).into_owned(),
+    )
+}
+
+/// Expect failure with one line holding every `want`.
+fn fails(args: &[&str], want: &[&str]) -> String {
+    let (code, err) = romosplat(args);
+    assert_eq!(code, 1, "romosplat {args:?}: exit {code}: {err}");
+    assert_eq!(err.trim_end().lines().count(), 1, "not one line: {err}");
+    for w in want {
+        assert!(err.contains(w), "romosplat {args:?}: {err:?} lacks {w:?}");
+    }
+    err
+}
+
+fn s(p: &Path) -> &str {
+    p.to_str().unwrap()
+}
+
+/// A 3-image scene (48×32 PNGs) with a valid binary COLMAP model.
+fn scene(root: &Path) -> PathBuf {
+    for k in 0..3u8 {
+        let img = image::RgbImage::from_fn(48, 32, |x, y| {
+            image::Rgb([x as u8 * 5, y as u8 * 7, k * 80])
+        });
+        loader::io::write_png_rgb8(root.join(format!("images/{k:03}.png")), &img).unwrap();
+    }
+    let mut m = ColmapModel::default();
+    m.cameras.insert(
+        1,
+        Camera {
+            id: 1,
+            model: CameraModel::PINHOLE,
+            width: 48,
+            height: 32,
+            params: vec![40.0, 40.0, 24.0, 16.0],
+        },
+    );
+    for k in 0..3u32 {
+        let pose = Pose {
+            qvec: [1.0, 0.0, 0.0, 0.0],
+            tvec: [k as f64 * 0.1, 0.0, 0.0],
+        };
+        m.images.insert(
+            k + 1,
+            ColmapImage::new(k + 1, pose, 1, format!("{k:03}.png")),
+        );
+    }
+    for id in 1..=8u64 {
+        m.points3d.insert(
+            id,
+            Point3D {
+                id,
+                xyz: [id as f64 * 0.1, 0.2, 3.0],
+                rgb: [200, 100, 50],
+                error: 0.5,
+                track: vec![],
+            },
+        );
+    }
+    let sparse = root.join("sparse/0");
+    write_model_binary(&m, &sparse).unwrap();
+    sparse
+}
+
+fn patch(path: &Path, offset: usize, bytes: &[u8]) {
+    let mut b = std::fs::read(path).unwrap();
+    b[offset..offset + bytes.len()].copy_from_slice(bytes);
+    std::fs::write(path, b).unwrap();
+}
+
+#[test]
+fn bad_scenes_are_refused_before_any_work() {
+    let dir = tempfile::tempdir().unwrap();
+    let train = |scene: &Path, out: &Path, want: &[&str]| {
+        fails(
+            &[
+                "train",
+                "--scene",
+                s(scene),
+                "--steps",
+                "2",
+                "--backend",
+                "cpu",
+                "--out",
+                s(out),
+            ],
+            want,
+        );
+        assert!(!out.exists(), "{} was created", out.display());
+    };
+    // (binary file, byte offset, new bytes, expected words)
+    let cases: [(&str, usize, Vec<u8>, &[&str]); 5] = [
+        (
+            "points3D.bin",
+            16,
+            f64::INFINITY.to_le_bytes().to_vec(),
+            &["points3D.bin", "point 1", "not finite"],
+        ),
+        (
+            "images.bin",
+            12,
+            [0u8; 32].to_vec(),
+            &["images.bin", "image 1 (000.png)", "quaternion"],
+        ),
+        (
+            "images.bin",
+            12,
+            f64::NAN.to_le_bytes().to_vec(),
+            &["images.bin", "cannot be normalised"],
+        ),
+        (
+            "images.bin",
+            68,
+            99u32.to_le_bytes().to_vec(),
+            &["images.bin", "missing camera 99"],
+        ),
+        (
+            "cameras.bin",
+            16,
+            0u64.to_le_bytes().to_vec(),
+            &["cameras.bin", "camera 1", "image size 0x32"],
+        ),
+    ];
+    for (k, (file, offset, bytes, want)) in cases.iter().enumerate() {
+        let root = dir.path().join(format!("s{k}"));
+        let sparse = scene(&root);
+        patch(&sparse.join(file), *offset, bytes);
+        train(&root, &dir.path().join(format!("o{k}")), want);
+    }
+    // An absurd downscale is refused with its range.
+    let root = dir.path().join("ok");
+    scene(&root);
+    fails(
+        &[
+            "train",
+            "--scene",
+            s(&root),
+            "--downscale",
+            "1000",
+            "--steps",
+            "2",
+            "--backend",
+            "cpu",
+            "--out",
+            s(&dir.path().join("od")),
+        ],
+        &["downscale 1000", "from 1 to 2"],
+    );
+    // A split that trains on a held-out view, and one in serde's words.
+    std::fs::write(
+        root.join("split.json"),
+        r#"{"clutter": [0, 1], "extra": [1]}"#,
+    )
+    .unwrap();
+    train(
+        &root,
+        &dir.path().join("os"),
+        &["split.json", "in both clutter"],
+    );
+    std::fs::write(
+        root.join("split.json"),
+        r#"{"clutter": [-1], "extra": [2]}"#,
+    )
+    .unwrap();
+    let e = fails(
+        &["inspect", s(&root)],
+        &["split.json", "index -1 is negative"],
+    );
+    assert!(!e.contains("untagged"), "{e}");
+}
+
+/// A splat PLY (INRIA layout, SH 0) as text, with `n` in the header.
+fn ascii_ply(count: &str, rows: &[&str]) -> String {
+    let mut t = format!("ply\nformat ascii 1.0\nelement vertex {count}\n");
+    for p in [
+        "x", "y", "z", "f_dc_0", "f_dc_1", "f_dc_2", "opacity", "scale_0", "scale_1", "scale_2",
+        "rot_0", "rot_1", "rot_2", "rot_3",
+    ] {
+        t += &format!("property float {p}\n");
+    }
+    t += "end_header\n";
+    for r in rows {
+        t += r;
+        t += "\n";
+    }
+    t
+}
+
+#[test]
+fn splat_files_read_everywhere_and_exports_read_back() {
+    let dir = tempfile::tempdir().unwrap();
+    let d = dir.path();
+    let rows = [
+        "0 0 3 0.1 0.2 0.3 1 -2 -2 -2 1 0 0 0",
+        "0.5 0 3 0.3 0.2 0.1 0 -2 -2 -3 1 0 0 0",
+    ];
+    // A header claiming 10^12 vertices: an error, not SIGABRT.
+    let huge = d.join("huge.ply");
+    std::fs::write(&huge, ascii_ply("1000000000000", &rows)).unwrap();
+    fails(&["inspect", s(&huge)], &["huge.ply", "truncated"]);
+    // NaN splats are refused by every reader, naming splat and property.
+    let nan = d.join("nan.ply");
+    std::fs::write(
+        &nan,
+        ascii_ply("2", &[rows[0], "0 nan 3 0 0 0 0 -2 -2 -2 1 0 0 0"]),
+    )
+    .unwrap();
+    let want = ["nan.ply", "splat 1", "property y"];
+    fails(&["inspect", s(&nan)], &want);
+    fails(
+        &["export", "--splats", s(&nan), "--out", s(&d.join("n.spz"))],
+        &want,
+    );
+    fails(
+        &[
+            "render",
+            "--splats",
+            s(&nan),
+            "--scene",
+            s(d),
+            "--out",
+            s(&d.join("r")),
+        ],
+        &want,
+    );
+    // ASCII PLY is read by export; every exported format reads back.
+    let ascii = d.join("a.ply");
+    std::fs::write(&ascii, ascii_ply("2", &rows)).unwrap();
+    for ext in ["ply", "spz", "splat", "glb"] {
+        let out = d.join(format!("e.{ext}"));
+        let (code, err) = romosplat(&["export", "--splats", s(&ascii), "--out", s(&out)]);
+        assert_eq!(code, 0, "{err}");
+        let (code, err) = romosplat(&["inspect", s(&out)]);
+        assert_eq!(code, 0, "inspect {ext}: {err}");
+        let (code, err) = romosplat(&[
+            "export",
+            "--splats",
+            s(&out),
+            "--out",
+            s(&d.join(format!("again_{ext}.ply"))),
+        ]);
+        assert_eq!(code, 0, "re-export {ext}: {err}");
+    }
+    // A format that contradicts the extension, or a folder as --out.
+    let glb = d.join("x.glb");
+    fails(
+        &[
+            "export",
+            "--splats",
+            s(&ascii),
+            "--format",
+            "ply",
+            "--out",
+            s(&glb),
+        ],
+        &["x.glb", "--format is ply"],
+    );
+    assert!(!glb.exists());
+    std::fs::create_dir(d.join("folder")).unwrap();
+    fails(
+        &[
+            "export",
+            "--splats",
+            s(&ascii),
+            "--out",
+            &format!("{}/", s(&d.join("folder"))),
+        ],
+        &["is a folder"],
+    );
+    // An OS error is printed once.
+    let e = fails(
+        &[
+            "export",
+            "--splats",
+            s(&ascii),
+            "--out",
+            s(&ascii.join("x.spz")),
+        ],
+        &["a.ply"],
+    );
+    assert_eq!(e.matches("os error").count(), 1, "{e}");
+}
+
+#[test]
+fn toml_errors_are_one_line() {
+    let dir = tempfile::tempdir().unwrap();
+    let bad = dir.path().join("bad.toml");
+    std::fs::write(&bad, "name = \"x\"\nwidth = [\n").unwrap();
+    fails(
+        &[
+            "scene",
+            "generate",
+            s(&bad),
+            "--out",
+            s(&dir.path().join("o")),
+        ],
+        &["bad.toml", "line "],
+    );
+}
