@@ -221,13 +221,13 @@ pub const ROTATION_TOLERANCE: f64 = 1e-3;
 pub fn check_rotation(m: &Matrix4<f64>) -> std::result::Result<(), String> {
     let r = m.fixed_view::<3, 3>(0, 0).into_owned();
     let dev = (r.transpose() * r - Matrix3::identity()).amax();
-    if !(dev <= ROTATION_TOLERANCE) {
+    if dev.is_nan() || dev > ROTATION_TOLERANCE {
         return Err(format!(
             "rotation is not orthonormal (max |RᵀR − I| = {dev:.3e}, tolerance {ROTATION_TOLERANCE:e})"
         ));
     }
     let det = r.determinant();
-    if !((det - 1.0).abs() <= ROTATION_TOLERANCE) {
+    if det.is_nan() || (det - 1.0).abs() > ROTATION_TOLERANCE {
         return Err(format!(
             "rotation has determinant {det:.4} (a reflection, not a rotation)"
         ));
