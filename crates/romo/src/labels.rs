@@ -99,6 +99,23 @@ pub struct LabelOptions {
     /// L-removal threshold of the three-view residual, working-grid px
     /// (default 1.0).
     pub three_view_l_px: f32,
+    /// Local U threshold (ours): a pixel is U when `S > u·min(v, max(m,
+    /// local_u_floor·v))`, `m` its own flow magnitude (mean over its valid
+    /// sides), instead of `S > u·v`. Flow noise grows with a pixel's own
+    /// motion, not with the frame's mean: when the camera follows an object
+    /// (it stays still in the image while the background streams past) the
+    /// object's residual is about the background's flow, i.e. about v, and
+    /// `S > u·v` splits it at random. 0 = off (the paper's global rule).
+    pub local_u_floor: f32,
+    /// A frame with fewer than this fraction of textured pixels (gradient
+    /// above [`crate::pipeline::TEXTURE_GRADIENT`]) is not used in any pair:
+    /// its flow is meaningless (default 0.01).
+    pub min_texture_fraction: f32,
+    /// A pair whose forward or backward flow is cycle-consistent and
+    /// photo-consistent (grey levels within
+    /// [`crate::pipeline::PHOTO_TOLERANCE`]) on less than this fraction of
+    /// pixels is skipped (default 0.05).
+    pub min_valid_fraction: f32,
     /// Robust estimation and model selection.
     pub robust: RobustOptions,
 }
@@ -118,6 +135,9 @@ impl Default for LabelOptions {
             three_view: true,
             three_view_u_px: 0.5,
             three_view_l_px: 1.0,
+            local_u_floor: 0.0,
+            min_texture_fraction: 0.01,
+            min_valid_fraction: 0.05,
             robust: RobustOptions::default(),
         }
     }
@@ -131,9 +151,12 @@ impl LabelOptions {
             || self.fit_points < 15
             || !(0.0..=1.0).contains(&self.f_informative_fraction)
             || !(self.three_view_u_px > 0.0 && self.three_view_l_px > 0.0)
+            || !(0.0..=1.0).contains(&self.local_u_floor)
+            || !(0.0..1.0).contains(&self.min_texture_fraction)
+            || !(0.0..1.0).contains(&self.min_valid_fraction)
         {
             return Err(crate::RomoError::Options(
-                "labels: need u_factor > l_factor >= 0, fit_points >= 15, f_informative_fraction in [0, 1], three_view_u_px and three_view_l_px > 0".into(),
+                "labels: need u_factor > l_factor >= 0, fit_points >= 15, f_informative_fraction in [0, 1], three_view_u_px and three_view_l_px > 0, min_texture_fraction and min_valid_fraction in [0, 1)".into(),
             ));
         }
         self.robust.validate()
@@ -317,6 +340,23 @@ pub struct FrameLabels {
     pub valid_ratio: f32,
 }
 
+impl FrameLabels {
+    /// Labels of a frame with no usable pair on either side: no residuals,
+    /// nothing in U or L.
+    pub fn no_evidence(n: usize) -> Self {
+        FrameLabels {
+            s: vec![f32::NAN; n],
+            u: vec![false; n],
+            l: vec![false; n],
+            v: 0.0,
+            inlier_ratio: 0.0,
+            u_coverage: 0.0,
+            l_coverage: 0.0,
+            valid_ratio: 0.0,
+        }
+    }
+}
+
 /// Residuals, U and L for a frame from its forward and/or backward sides.
 pub fn frame_labels(sides: &[Side], o: &LabelOptions) -> FrameLabels {
     let Some(first) = sides.first() else {
@@ -362,7 +402,25 @@ pub fn frame_labels(sides: &[Side], o: &LabelOptions) -> FrameLabels {
         .map(|sd| (o.robust.inlier_sigmas * sd.report.sigma_px) as f32)
         .fold(0.0f32, f32::max);
     let (ut, lt) = (o.u_factor * v, o.l_factor * v);
-    let u: Vec<bool> = s.iter().map(|x| !x.is_nan() && *x > ut).collect();
+    let u: Vec<bool> = if o.local_u_floor > 0.0 {
+        (0..n)
+            .into_par_iter()
+            .map(|i| {
+                let (mut m, mut k) = (0.0f32, 0u32);
+                for sd in sides {
+                    if sd.valid[i] {
+                        m += sd.flow.u.data[i].hypot(sd.flow.v.data[i]);
+                        k += 1;
+                    }
+                }
+                let m = m / k.max(1) as f32;
+                let t = o.u_factor * v.min(m.max(o.local_u_floor * v));
+                !s[i].is_nan() && s[i] > t
+            })
+            .collect()
+    } else {
+        s.iter().map(|x| !x.is_nan() && *x > ut).collect()
+    };
     let l: Vec<bool> = s.iter().map(|x| !x.is_nan() && *x < lt).collect();
     let nv = s.iter().filter(|x| !x.is_nan()).count();
     let ni = s.iter().filter(|x| !x.is_nan() && **x < inlier_thr).count();

@@ -219,6 +219,15 @@ impl FrameSource for [Rgb] {
     }
 }
 
+impl FrameSource for Vec<Rgb> {
+    fn len(&self) -> usize {
+        <[Rgb]>::len(self)
+    }
+    fn frame(&self, i: usize) -> Result<Rgb> {
+        self.as_slice().frame(i)
+    }
+}
+
 /// Per-frame diagnostics.
 #[derive(Debug, Clone, Default, Serialize, Deserialize)]
 pub struct FrameReport {
@@ -265,6 +274,25 @@ pub struct RomoReport {
     pub masks_dir: Option<PathBuf>,
     /// split.json `extra` views given all-keep masks (not part of the video).
     pub held_out_views: usize,
+    /// Pairs (p = frames p, p+1) left out: a frame without texture, too few
+    /// cycle-consistent correspondences, or no model could be fitted. Their
+    /// frames are labelled from their other neighbour.
+    pub skipped_pairs: Vec<SkippedPair>,
+    /// Frames with no usable pair on either side: no evidence of motion, so
+    /// they are kept whole (probability 0).
+    pub no_evidence_frames: Vec<usize>,
+    /// One line per problem the run worked around (skipped pairs, frames
+    /// without evidence), for the user.
+    pub warnings: Vec<String>,
+}
+
+/// A pair the pipeline could not use, and why.
+#[derive(Debug, Clone, Default, Serialize, Deserialize)]
+pub struct SkippedPair {
+    /// Pair index p (frames p and p+1).
+    pub pair: usize,
+    /// Why it was skipped.
+    pub reason: String,
 }
 
 /// Low-resolution result of [`segment_frames`].
@@ -300,6 +328,41 @@ struct Prepared {
     c: usize,
     /// Focal length at the working grid (px).
     grid_focal: f64,
+    /// Per pair: why it cannot be used (a textureless frame or too few
+    /// cycle-consistent correspondences), None when usable. The fit may
+    /// still fail later ([`label_round`]).
+    unusable: Vec<Option<String>>,
+}
+
+/// A correspondence is photo-consistent when the grey levels (in [0, 1]) at
+/// its two ends differ by less than this.
+pub const PHOTO_TOLERANCE: f32 = 0.1;
+
+/// A pixel is textured when its central-difference gradient exceeds this
+/// (intensity in [0, 1] per px; ≈ 2 grey levels of 255).
+pub const TEXTURE_GRADIENT: f32 = 2.0 / 255.0;
+
+/// Fraction of a grey frame's pixels whose gradient exceeds
+/// [`TEXTURE_GRADIENT`].
+pub fn texture_fraction(g: &Plane) -> f32 {
+    let (w, h) = (g.w, g.h);
+    if w < 3 || h < 3 {
+        return 0.0;
+    }
+    let mut n = 0usize;
+    for y in 1..h - 1 {
+        let row = &g.data[y * w..(y + 1) * w];
+        let up = &g.data[(y - 1) * w..y * w];
+        let dn = &g.data[(y + 1) * w..(y + 2) * w];
+        for x in 1..w - 1 {
+            let gx = 0.5 * (row[x + 1] - row[x - 1]);
+            let gy = 0.5 * (dn[x] - up[x]);
+            if gx.abs().max(gy.abs()) > TEXTURE_GRADIENT {
+                n += 1;
+            }
+        }
+    }
+    n as f32 / ((w - 2) * (h - 2)) as f32
 }
 
 fn prepare(
@@ -353,8 +416,9 @@ fn prepare(
             .collect::<Result<Vec<_>>>()
     })?;
     progress("flow", n - 1, n - 1);
+    let textured: Vec<f32> = grays.par_iter().map(texture_fraction).collect();
     let (fwd, bwd): (Vec<Flow>, Vec<Flow>) = flows.into_iter().unzip();
-    let (valid_f, valid_b): (Vec<Vec<bool>>, Vec<Vec<bool>>) = t.time("cycle", || {
+    let (mut valid_f, mut valid_b): (Vec<Vec<bool>>, Vec<Vec<bool>>) = t.time("cycle", || {
         (0..n - 1)
             .into_par_iter()
             .map(|p| {
@@ -365,6 +429,58 @@ fn prepare(
             })
             .unzip()
     });
+    let grid_grays: Vec<Plane> = grays.par_iter().map(|g| g.resize(gw, gh)).collect();
+    let unusable: Vec<Option<String>> = (0..n - 1)
+        .into_par_iter()
+        .map(|p| {
+            let flat: Vec<usize> = [p, p + 1]
+                .into_iter()
+                .filter(|&i| textured[i] < o.labels.min_texture_fraction)
+                .collect();
+            if !flat.is_empty() {
+                let list: Vec<String> = flat.iter().map(|i| format!("frame {i}")).collect();
+                return Some(format!(
+                    "no texture in {} (< {:.1}% of pixels with a gradient)",
+                    list.join(" and "),
+                    100.0 * o.labels.min_texture_fraction
+                ));
+            }
+            // Cycle-consistent and photo-consistent: two unrelated frames
+            // (noise, a cut) can give a smooth near-zero flow that passes
+            // the cycle check everywhere but matches nothing.
+            let consistent = |fl: &Flow, v: &[bool], a: &Plane, b: &Plane| {
+                let w = fl.w();
+                let k = (0..v.len())
+                    .filter(|&i| {
+                        v[i] && {
+                            let (x, y) = ((i % w) as f32, (i / w) as f32);
+                            let q = b.bilinear(x + fl.u.data[i], y + fl.v.data[i]);
+                            (a.data[i] - q).abs() < PHOTO_TOLERANCE
+                        }
+                    })
+                    .count();
+                k as f32 / v.len().max(1) as f32
+            };
+            let (a, b) = (&grid_grays[p], &grid_grays[p + 1]);
+            let vf =
+                consistent(&fwd[p], &valid_f[p], a, b).min(consistent(&bwd[p], &valid_b[p], b, a));
+            (vf < o.labels.min_valid_fraction).then(|| {
+                format!(
+                    "{:.1}% of pixels have a cycle- and photo-consistent flow (< {:.1}%)",
+                    100.0 * vf,
+                    100.0 * o.labels.min_valid_fraction
+                )
+            })
+        })
+        .collect();
+    // Unusable pairs carry no correspondences for anything downstream
+    // (labels, temporal smoothing).
+    for (p, u) in unusable.iter().enumerate() {
+        if u.is_some() {
+            valid_f[p].fill(false);
+            valid_b[p].fill(false);
+        }
+    }
     progress("features", 0, n);
     let mut maps: Vec<FeatureMap> = t.time("features", || {
         small
@@ -385,25 +501,30 @@ fn prepare(
         feats,
         c,
         grid_focal,
+        unusable,
     })
 }
 
-/// Labels of every frame and the fit of every pair in one round.
-type RoundLabels = (Vec<FrameLabels>, Vec<PairFit>);
+/// Labels of every frame and the fit of every pair in one round (None for
+/// a pair that is unusable or could not be fitted, with the reason).
+type RoundLabels = (Vec<FrameLabels>, Vec<std::result::Result<PairFit, String>>);
 
-/// Fit every pair (excluding pixels in `moving`, per frame) and label every
-/// frame.
+/// Fit every usable pair (excluding pixels in `moving`, per frame) and
+/// label every frame from the pairs on either side that were fitted.
 fn label_round(
     pr: &Prepared,
     moving: Option<&[Vec<bool>]>,
-    prev: Option<&[PairFit]>,
+    prev: Option<&[std::result::Result<PairFit, String>]>,
     o: &RomoOptions,
     round: usize,
-) -> Result<RoundLabels> {
+) -> RoundLabels {
     let np = pr.fwd.len();
-    let fits: Vec<PairFit> = (0..np)
+    let fits: Vec<std::result::Result<PairFit, String>> = (0..np)
         .into_par_iter()
         .map(|p| {
+            if let Some(why) = &pr.unusable[p] {
+                return Err(why.clone());
+            }
             let usable: Vec<bool> = match moving {
                 Some(m) => pr.valid_f[p]
                     .iter()
@@ -418,48 +539,57 @@ fn label_round(
             // A pair where F was informative in the first round keeps F:
             // with the object excluded from the fit, F would call nothing
             // moving and the override would not fire again.
-            if let Some(prev) = prev
+            if let Some(Some(Ok(prev))) = prev.map(|v| v.get(p))
                 && o.labels.f_informative_fraction > 0.0
-                && prev[p].report.model == "F"
-                && prev[p].report.u_fraction_f >= o.labels.f_informative_fraction as f64
+                && prev.report.model == "F"
+                && prev.report.u_fraction_f >= o.labels.f_informative_fraction as f64
             {
                 lo.robust.selection = ModelSelection::Fundamental;
             }
             let focal = Some(pr.grid_focal);
             fit_pair(&pr.fwd[p], &usable, &lo, seed, focal)
                 .or_else(|_| fit_pair(&pr.fwd[p], &pr.valid_f[p], &lo, seed, focal))
-                .map_err(|e| RomoError::Geometry(format!("pair {p}–{}: {e}", p + 1)))
+                .map_err(|e| format!("no model could be fitted ({e})"))
         })
-        .collect::<Result<Vec<_>>>()?;
+        .collect();
+    let (gw, gh) = (pr.fwd[0].w(), pr.fwd[0].h());
     let labels = (0..=np)
         .into_par_iter()
         .map(|t| {
             let mut sides = Vec::with_capacity(2);
-            if t < np {
+            if t < np
+                && let Ok(fit) = &fits[t]
+            {
                 sides.push(Side {
                     flow: &pr.fwd[t],
                     valid: &pr.valid_f[t],
-                    model: fits[t].model,
-                    report: &fits[t].report,
+                    model: fit.model,
+                    report: &fit.report,
                     second: false,
-                    oriented: fits[t].oriented.as_ref(),
+                    oriented: fit.oriented.as_ref(),
                 });
             }
-            if t > 0 {
+            if t > 0
+                && let Ok(fit) = &fits[t - 1]
+            {
                 sides.push(Side {
                     flow: &pr.bwd[t - 1],
                     valid: &pr.valid_b[t - 1],
-                    model: fits[t - 1].model,
-                    report: &fits[t - 1].report,
+                    model: fit.model,
+                    report: &fit.report,
                     second: true,
-                    oriented: fits[t - 1].oriented.as_ref(),
+                    oriented: fit.oriented.as_ref(),
                 });
+            }
+            if sides.is_empty() {
+                return FrameLabels::no_evidence(gw * gh);
             }
             let mut fl = frame_labels(&sides, &o.labels);
             if o.labels.three_view
                 && t > 0
                 && t < np
-                && let (Some(of), Some(ob)) = (&fits[t].oriented, &fits[t - 1].oriented)
+                && let (Ok(ff), Ok(fb)) = (&fits[t], &fits[t - 1])
+                && let (Some(of), Some(ob)) = (&ff.oriented, &fb.oriented)
                 && let Some(e) = three_view_residuals(
                     &pr.fwd[t],
                     &pr.valid_f[t],
@@ -475,7 +605,7 @@ fn label_round(
             fl
         })
         .collect();
-    Ok((labels, fits))
+    (labels, fits)
 }
 
 /// Draw training samples: per kept frame up to `samples_per_frame`, half
@@ -573,7 +703,7 @@ pub fn segment_frames_with_labels(
         let prev = last.as_ref().map(|l| l.1.as_slice());
         let (mut labels, fits) = tm.time("geometry", || {
             label_round(&pr, moving.as_deref(), prev, o, round)
-        })?;
+        });
         if let Some(hook) = label_hook {
             for (t, fl) in labels.iter_mut().enumerate() {
                 hook(t, report.grid, fl);
@@ -673,6 +803,42 @@ pub fn segment_frames_with_labels(
             planes = temporal_smooth(&planes, o.refine.temporal_weight);
         }
     }
+    // Frames without a usable pair on either side carry no evidence of
+    // motion: keep them whole rather than trust the MLP's guess on them.
+    if let Some((_, fits)) = &last {
+        let np = fits.len();
+        for (p, f) in fits.iter().enumerate() {
+            if let Err(reason) = f {
+                report.warnings.push(format!(
+                    "pair {p}–{} skipped: {reason}; its frames are labelled from their other neighbour",
+                    p + 1
+                ));
+                report.skipped_pairs.push(SkippedPair {
+                    pair: p,
+                    reason: reason.clone(),
+                });
+            }
+        }
+        for (t, plane) in planes.iter_mut().enumerate() {
+            let fwd_ok = t < np && fits[t].is_ok();
+            let bwd_ok = t > 0 && fits[t - 1].is_ok();
+            if !fwd_ok && !bwd_ok {
+                plane.data.fill(0.0);
+                report.no_evidence_frames.push(t);
+            }
+        }
+        if !report.no_evidence_frames.is_empty() {
+            let list: Vec<String> = report
+                .no_evidence_frames
+                .iter()
+                .map(|t| t.to_string())
+                .collect();
+            report.warnings.push(format!(
+                "no evidence of motion in frame(s) {} (no usable pair on either side): kept whole",
+                list.join(", ")
+            ));
+        }
+    }
     let mut u_all = Vec::new();
     let mut l_all = Vec::new();
     if let Some((labels, fits)) = last {
@@ -686,10 +852,10 @@ pub fn segment_frames_with_labels(
             report.frames.push(FrameReport {
                 index: t,
                 name: String::new(),
-                model_fwd: fits
-                    .get(t)
-                    .map(|f| f.report.model.clone())
-                    .unwrap_or_default(),
+                model_fwd: match fits.get(t) {
+                    Some(Ok(f)) => f.report.model.clone(),
+                    _ => String::new(),
+                },
                 inlier_ratio: l.inlier_ratio,
                 u_coverage: l.u_coverage,
                 l_coverage: l.l_coverage,
@@ -704,7 +870,10 @@ pub fn segment_frames_with_labels(
                     / (gw * gh) as f32,
             });
         }
-        report.pairs = fits.into_iter().map(|f| f.report).collect();
+        report.pairs = fits
+            .into_iter()
+            .map(|f| f.map(|f| f.report).unwrap_or_else(|_| FitReport::skipped()))
+            .collect();
     }
     for (k, v) in timings {
         *report.timings_ms.entry(k).or_default() += v;

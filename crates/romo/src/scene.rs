@@ -148,12 +148,29 @@ pub fn segment_scene(
         opts.focal_ratio = Some(0.5 * (k.fx + k.fy) / k.width.max(1) as f64);
     }
     let opts = &opts;
-    let mut report = segment_source(&SceneSource(scene, video), &names, &out, opts, progress)?;
+    // Masks are written at the images' own size, also when the scene was
+    // loaded downscaled (`train` and COLMAP expect them at that size).
+    let own_size = |i: usize| {
+        let k = &scene.frames[i].intrinsics;
+        scene.full_size(i).unwrap_or((k.width, k.height))
+    };
+    let sizes: Vec<(usize, usize)> = video
+        .iter()
+        .map(|&i| {
+            let (w, h) = own_size(i);
+            (w as usize, h as usize)
+        })
+        .collect();
+    let mut report = segment_source(
+        &SceneSource(scene, video),
+        &names,
+        Some(&sizes),
+        &out,
+        opts,
+        progress,
+    )?;
     for &i in &extra {
-        let (w, h) = (
-            scene.frames[i].intrinsics.width,
-            scene.frames[i].intrinsics.height,
-        );
+        let (w, h) = own_size(i);
         let keep = image::GrayImage::from_pixel(w, h, image::Luma([255]));
         loader::masks::write_mask(
             loader::masks::mask_path(&out.join("masks"), &scene.frames[i].name),
@@ -175,12 +192,15 @@ pub fn segment_paths(
     let src = PathSource {
         paths: paths.to_vec(),
     };
-    segment_source(&src, names, out, opts, progress)
+    segment_source(&src, names, None, out, opts, progress)
 }
 
+/// `sizes[i]`: the size frame i's mask and probabilities are written at
+/// (None: the frame's own).
 fn segment_source(
     src: &dyn FrameSource,
     names: &[String],
+    sizes: Option<&[(usize, usize)]>,
     out: &Path,
     opts: &RomoOptions,
     progress: &dyn Fn(&str, usize, usize),
@@ -203,7 +223,11 @@ fn segment_source(
         .try_for_each(|i| -> Result<()> {
             let frame = src.frame(i)?;
             let prob = upsample_probability(&seg.probs[i], &frame, &opts.refine);
-            let keep = to_keep_mask(&prob, opts.refine.threshold);
+            let sized = match sizes.and_then(|s| s.get(i)) {
+                Some(&(w, h)) if (w, h) != (prob.w, prob.h) => prob.resize(w, h),
+                _ => prob.clone(),
+            };
+            let keep = to_keep_mask(&sized, opts.refine.threshold);
             loader::masks::write_mask(loader::masks::mask_path(&masks_dir, &names[i]), &keep)?;
             if opts.overlays {
                 write_overlay(
@@ -220,7 +244,7 @@ fn segment_source(
                     .unwrap_or_else(|| names[i].clone());
                 write_exr(
                     &out.join("probabilities").join(format!("{stem}.exr")),
-                    &prob,
+                    &sized,
                 )?;
             }
             Ok(())

@@ -132,3 +132,48 @@ fn pure_rotation_video_is_scored_with_homographies() {
     assert!(j >= 0.7, "J {j} (precision {p}, recall {r})");
     assert!(j >= jf + 0.25, "default J {j} vs F-only {jf}");
 }
+
+/// `mask --downscale N` segments the frames at 1/N but writes the masks at
+/// the images' own size: the loader (and so `train` and `pose`) accepts
+/// them, and they still find the pedestrians.
+#[test]
+fn masks_of_a_downscaled_scene_have_the_images_size() {
+    let spec_path = Path::new(env!("CARGO_MANIFEST_DIR")).join("../../scenes/small.toml");
+    let mut spec = loader::synth::load_spec(&spec_path).unwrap();
+    spec.frames = 8;
+    spec.supersample = 1;
+    let dir = tempfile::tempdir().unwrap();
+    loader::synth::generate(&spec, dir.path()).unwrap();
+    let scene =
+        loader::scene::Scene::load(dir.path(), &loader::scene::SceneOptions { downscale: 2 })
+            .unwrap();
+    let mut opts = romo::RomoOptions::default();
+    opts.labels.robust.iterations = 200;
+    romo::segment_scene(&scene, &opts, &|_, _, _| {}).unwrap();
+    // The masks now sit in the scene's masks/: loading checks their size.
+    let full = loader::scene::Scene::load(dir.path(), &Default::default()).unwrap();
+    for (i, f) in full.frames.iter().enumerate() {
+        let p = f.mask_path.as_ref().expect("every frame has a mask");
+        let m = loader::io::read_gray8(p).unwrap();
+        assert_eq!(
+            m.dimensions(),
+            (f.intrinsics.width, f.intrinsics.height),
+            "{}",
+            p.display()
+        );
+        assert!(full.load_mask(i).unwrap().is_some());
+    }
+    let m = romo::evaluate_scene_masks(&full, &dir.path().join("masks")).unwrap();
+    eprintln!(
+        "downscale 2: J {:.3} P {:.3} R {:.3}",
+        m.j_mean, m.precision, m.recall
+    );
+    // Measured 2026-11-25: J 0.359, P 0.95, R 0.36 (8 frames at half size:
+    // a short, coarse video; this test is about the masks' size).
+    assert!(
+        m.j_mean >= 0.25 && m.precision >= 0.8,
+        "J {} P {}",
+        m.j_mean,
+        m.precision
+    );
+}

@@ -39,7 +39,8 @@ pub struct Args {
     /// Full options as JSON (a partial `RomoOptions`; flags above override).
     #[arg(long)]
     pub options: Option<PathBuf>,
-    /// Integer downscale of the frames on load.
+    /// Integer downscale of the frames on load (masks are still written at
+    /// the images' own size).
     #[arg(long, default_value_t = 1)]
     pub downscale: u32,
     /// Random seed.
@@ -175,6 +176,9 @@ pub fn run(args: &Args, ctx: &Ctx) -> anyhow::Result<serde_json::Value> {
     stage.commit()?;
     let mut report = report;
     report.masks_dir = Some(out.join("masks"));
+    for w in &report.warnings {
+        ctx.info(format!("warning: {w}"));
+    }
     let moving: f32 = report.frames.iter().map(|f| f.moving_fraction).sum::<f32>()
         / report.frames.len().max(1) as f32;
     ctx.info(format!(

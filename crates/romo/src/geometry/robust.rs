@@ -145,6 +145,24 @@ pub struct FitReport {
     pub cheirality_support: f64,
 }
 
+impl FitReport {
+    /// The report of a pair that was skipped (model "", no points).
+    pub fn skipped() -> Self {
+        FitReport {
+            model: String::new(),
+            points: 0,
+            inliers: 0,
+            iterations: 0,
+            median_residual_px: f64::NAN,
+            sigma_px: f64::NAN,
+            gric_f: f64::NAN,
+            gric_h: f64::NAN,
+            u_fraction_f: f64::NAN,
+            cheirality_support: f64::NAN,
+        }
+    }
+}
+
 #[derive(Clone)]
 struct Fit {
     model: TwoView,

@@ -1,0 +1,144 @@
+//! Degenerate videos: frames without texture or without valid
+//! correspondences carry no evidence of motion. They are kept whole (moving
+//! probability 0) with a warning naming them, the pairs they spoil are
+//! skipped, their neighbours are labelled from their other side, and the
+//! stage never stops.
+#![allow(clippy::unwrap_used, clippy::expect_used)]
+
+use romo::plane::Rgb;
+
+const W: usize = 160;
+const H: usize = 120;
+
+/// A smooth, aperiodic texture value at (x, y) in world units.
+fn texture(x: f32, y: f32) -> f32 {
+    let s = (0.11 * x + 0.05 * y).sin() * (0.07 * y - 0.03 * x).cos()
+        + 0.5 * (0.23 * x - 0.17 * y + 1.0).sin()
+        + 0.35 * (0.31 * y + 0.13 * x).cos() * (0.019 * x * y * 0.05).sin();
+    0.5 + 0.2 * s
+}
+
+/// Frame t of a panning camera (the world shifts by (2t, t) px) with a
+/// 30×30 square of its own texture moving by (−3, 1) px per frame.
+fn frame(t: usize) -> Rgb {
+    let (cx, cy) = (2.0 * t as f32, t as f32);
+    let (sx, sy) = (100.0 - 3.0 * t as f32, 40.0 + t as f32);
+    let mut data = Vec::with_capacity(W * H * 3);
+    for y in 0..H {
+        for x in 0..W {
+            let (xf, yf) = (x as f32, y as f32);
+            let inside = xf >= sx && xf < sx + 30.0 && yf >= sy && yf < sy + 30.0;
+            let v = if inside {
+                1.0 - texture(3.0 * (xf - sx), 3.0 * (yf - sy))
+            } else {
+                texture(xf + cx, yf + cy)
+            };
+            data.extend_from_slice(&[v, 0.8 * v + 0.1, 1.0 - 0.6 * v]);
+        }
+    }
+    Rgb::from_interleaved(W, H, &data)
+}
+
+fn black() -> Rgb {
+    Rgb::from_interleaved(W, H, &vec![0.0; W * H * 3])
+}
+
+/// Independent uniform noise per pixel (seeded): texture, but no frame
+/// corresponds to it.
+fn noise(seed: u64) -> Rgb {
+    let mut s = seed
+        .wrapping_mul(6364136223846793005)
+        .wrapping_add(1442695040888963407);
+    let data: Vec<f32> = (0..W * H * 3)
+        .map(|_| {
+            s = s
+                .wrapping_mul(6364136223846793005)
+                .wrapping_add(1442695040888963407);
+            (s >> 40) as f32 / (1u64 << 24) as f32
+        })
+        .collect();
+    Rgb::from_interleaved(W, H, &data)
+}
+
+fn run(frames: Vec<Rgb>) -> romo::pipeline::Segmentation {
+    let mut o = romo::RomoOptions::default();
+    o.labels.robust.iterations = 200;
+    let fx = romo::scene::make_extractor(&o).unwrap();
+    let flow = romo::scene::make_flow(&o).unwrap();
+    romo::pipeline::segment_frames(&frames, &o, flow.as_ref(), fx.as_ref(), &|_, _, _| {}).unwrap()
+}
+
+fn all_zero(p: &romo::plane::Plane) -> bool {
+    p.data.iter().all(|v| *v == 0.0)
+}
+
+#[test]
+fn black_frames_are_kept_whole_with_a_warning() {
+    let frames: Vec<Rgb> = (0..10)
+        .map(|t| if t == 4 || t == 5 { black() } else { frame(t) })
+        .collect();
+    let seg = run(frames);
+    let r = &seg.report;
+    assert_eq!(r.no_evidence_frames, vec![4, 5], "{:?}", r.warnings);
+    let skipped: Vec<usize> = r.skipped_pairs.iter().map(|p| p.pair).collect();
+    assert_eq!(skipped, vec![3, 4, 5], "{:?}", r.skipped_pairs);
+    assert!(r.skipped_pairs[0].reason.contains("no texture in frame 4"));
+    assert!(
+        r.warnings.iter().any(|w| w.contains("frame(s) 4, 5")),
+        "{:?}",
+        r.warnings
+    );
+    assert!(all_zero(&seg.probs[4]) && all_zero(&seg.probs[5]));
+    // Their neighbours are labelled from their other side.
+    for t in [3, 6] {
+        assert!(
+            r.frames[t].valid_ratio > 0.5,
+            "frame {t}: {:?}",
+            r.frames[t]
+        );
+        assert!(r.frames[t].l_coverage > 0.3, "frame {t}: {:?}", r.frames[t]);
+    }
+    assert_eq!(r.frames[3].model_fwd, "");
+    assert_ne!(r.frames[2].model_fwd, "");
+}
+
+#[test]
+fn an_all_black_video_is_kept_whole() {
+    let frames = vec![black(); 4];
+    let seg = run(frames);
+    assert_eq!(seg.report.no_evidence_frames, vec![0, 1, 2, 3]);
+    assert_eq!(seg.report.skipped_pairs.len(), 3);
+    assert!(seg.probs.iter().all(all_zero));
+}
+
+#[test]
+fn noise_frames_do_not_stop_the_stage() {
+    let frames: Vec<Rgb> = (0..10)
+        .map(|t| match t {
+            4 => noise(1),
+            5 => noise(2),
+            _ => frame(t),
+        })
+        .collect();
+    let seg = run(frames);
+    let r = &seg.report;
+    let skipped: Vec<usize> = r.skipped_pairs.iter().map(|p| p.pair).collect();
+    assert!(skipped.contains(&4), "{:?}", r.skipped_pairs);
+    assert!(
+        r.skipped_pairs
+            .iter()
+            .find(|p| p.pair == 4)
+            .is_some_and(|p| p.reason.contains("photo-consistent")),
+        "{:?}",
+        r.skipped_pairs
+    );
+    // Frames 4 and 5 have no usable pair: kept whole.
+    for t in &r.no_evidence_frames {
+        assert!(all_zero(&seg.probs[*t]));
+    }
+    assert!(r.no_evidence_frames.contains(&4) && r.no_evidence_frames.contains(&5));
+    // The clean frames further away keep their labels.
+    for t in [0, 1, 2, 7, 8, 9] {
+        assert!(r.frames[t].l_coverage > 0.3, "frame {t}: {:?}", r.frames[t]);
+    }
+}
