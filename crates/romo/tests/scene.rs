@@ -124,7 +124,7 @@ fn pure_rotation_video_is_scored_with_homographies() {
     // R 0.90), H for 22 of 23 pairs; F only: J 0.373 (recall 0.39). With
     // the 2 held-out views counted (J 1 each): default 0.787 (0.790 before
     // L < 0.1·v), F only 0.418, the inlier-ratio rule at 0.95 0.579 (H for
-    // 8 pairs only), GRIC 0.783 (22). Session 7 (finer flow, veto 0.02·v):
+    // 8 pairs only), GRIC 0.783 (22). With the mask flow preset and veto 0.02·v:
     // default 0.798 (P 0.89, R 0.88), H for 22 pairs; F only 0.243; with
     // the colour guide 0.837 (P 0.91, R 0.91); F only 0.245.
     assert_eq!(hf, 0);
