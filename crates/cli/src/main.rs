@@ -6,6 +6,7 @@ mod ctx;
 mod keyframes;
 mod pipeline;
 mod plan;
+mod preflight;
 mod report;
 
 use clap::Parser;

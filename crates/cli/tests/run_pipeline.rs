@@ -1,18 +1,26 @@
-//! End to end through the binary: `romosplat run` on a generated scene makes
-//! every output, a rerun skips every stage, and `--from` reruns from a stage.
+//! End to end through the binary, on the small built-in scene: `run --video`
+//! on an mp4 made with ffmpeg (no split.json: every 8th frame held out)
+//! through the report; `run --scene` without a split.json, and what reruns
+//! when nothing, an option, an input file, an options file, the version or
+//! the input changes; preflight errors before any stage.
 #![allow(clippy::unwrap_used, clippy::expect_used)]
 
-use std::path::Path;
-use std::process::Command;
+use std::path::{Path, PathBuf};
+use std::process::{Command, Output};
+use std::time::{Duration, SystemTime};
 
-fn romosplat(args: &[&str]) -> serde_json::Value {
-    let out = Command::new(env!("CARGO_BIN_EXE_romosplat"))
+fn romosplat_raw(args: &[&str]) -> Output {
+    Command::new(env!("CARGO_BIN_EXE_romosplat"))
         .args(args)
         .arg("--json")
         .arg("--quiet")
         .env("XDG_RUNTIME_DIR", std::env::temp_dir())
         .output()
-        .unwrap();
+        .unwrap()
+}
+
+fn romosplat(args: &[&str]) -> serde_json::Value {
+    let out = romosplat_raw(args);
     assert!(
         out.status.success(),
         "romosplat {args:?} failed: {}",
@@ -21,11 +29,20 @@ fn romosplat(args: &[&str]) -> serde_json::Value {
     serde_json::from_slice(&out.stdout).unwrap()
 }
 
-#[test]
-fn run_resumes_and_restarts_from_a_stage() {
-    let dir = tempfile::tempdir().unwrap();
-    let scene = dir.path().join("scene");
-    let out = dir.path().join("out");
+/// The stages a run ran, in order.
+fn ran(v: &serde_json::Value) -> Vec<String> {
+    v["ran"]
+        .as_array()
+        .unwrap()
+        .iter()
+        .map(|s| s.as_str().unwrap().to_string())
+        .collect()
+}
+
+/// The small scene, generated into `dir/small`; returns it and its
+/// training (clutter) frame names in order.
+fn small_scene(dir: &Path) -> (PathBuf, Vec<String>) {
+    let scene = dir.join("small");
     let spec = Path::new(env!("CARGO_MANIFEST_DIR")).join("../../scenes/small.toml");
     romosplat(&[
         "scene",
@@ -34,53 +51,242 @@ fn run_resumes_and_restarts_from_a_stage() {
         "--out",
         scene.to_str().unwrap(),
     ]);
+    let s = loader::scene::Scene::load(&scene, &Default::default()).unwrap();
+    let train = s
+        .split_indices("clutter")
+        .iter()
+        .map(|&i| s.frames[i].name.clone())
+        .collect();
+    (scene, train)
+}
+
+/// A scene folder with `names` (from `src`), the model, and no split.json.
+fn scene_without_split(src: &Path, dst: &Path, names: &[String]) {
+    std::fs::create_dir_all(dst.join("images")).unwrap();
+    for n in names {
+        std::fs::copy(src.join("images").join(n), dst.join("images").join(n)).unwrap();
+    }
+    std::fs::create_dir_all(dst.join("sparse/0")).unwrap();
+    for e in std::fs::read_dir(src.join("sparse/0")).unwrap() {
+        let e = e.unwrap();
+        std::fs::copy(e.path(), dst.join("sparse/0").join(e.file_name())).unwrap();
+    }
+}
+
+fn set_mtime(p: &Path, t: SystemTime) {
+    std::fs::File::options()
+        .write(true)
+        .open(p)
+        .unwrap()
+        .set_modified(t)
+        .unwrap();
+}
+
+#[test]
+fn run_video_end_to_end_without_a_split() {
+    let dir = tempfile::tempdir().unwrap();
+    let (scene, train) = small_scene(dir.path());
+    // The training frames, renumbered, as an mp4 (MPEG-4 part 2 at high
+    // quality: every ffmpeg build has the encoder).
+    let frames = dir.path().join("frames");
+    std::fs::create_dir_all(&frames).unwrap();
+    for (i, n) in train.iter().enumerate() {
+        std::fs::copy(
+            scene.join("images").join(n),
+            frames.join(format!("{:05}.png", i + 1)),
+        )
+        .unwrap();
+    }
+    let video = dir.path().join("walk.mp4");
+    let st = Command::new("ffmpeg")
+        .args(["-v", "error", "-y", "-framerate", "10", "-i"])
+        .arg(frames.join("%05d.png"))
+        .args(["-c:v", "mpeg4", "-q:v", "2", "-pix_fmt", "yuv420p"])
+        .arg(&video)
+        .status()
+        .unwrap();
+    assert!(st.success(), "ffmpeg could not make the test video");
+
+    let romo_json = dir.path().join("romo.json");
+    std::fs::write(&romo_json, r#"{"seed": 0}"#).unwrap();
+    let out = dir.path().join("out");
     let args = [
         "run",
-        "--scene",
-        scene.to_str().unwrap(),
-        "--keep-poses",
+        "--video",
+        video.to_str().unwrap(),
+        "--mask-options",
+        romo_json.to_str().unwrap(),
         "--steps",
-        "20",
+        "30",
+        "--downscale",
+        "2",
         "--backend",
         "cpu",
         "--out",
         out.to_str().unwrap(),
     ];
     let first = romosplat(&args);
-    for stage in ["frames", "mask", "train", "export", "report"] {
-        assert_eq!(
-            first["stages"][stage], true,
-            "{stage} should run the first time"
-        );
-    }
     assert_eq!(
-        first["stages"]["pose"], false,
-        "--keep-poses keeps the scene's poses"
+        ran(&first),
+        ["frames", "mask", "pose", "train", "export", "report"]
     );
-    for f in [
-        "train/splats.ply",
-        "splats_clean.ply",
-        "report.html",
-        "scene/masks/00000.png.png",
-    ] {
+    let n = train.len();
+    assert_eq!(first["frames"]["frames"], n);
+    let registered = first["pose"]["registered"].as_u64().unwrap() as usize;
+    assert!(
+        registered * 10 >= n * 8,
+        "COLMAP registered {registered} of {n} frames"
+    );
+    // No split.json: every 8th posed frame is held out, scored and rendered.
+    let test = &first["train"]["test"];
+    let views = test["views"].as_array().unwrap();
+    assert!(!views.is_empty() && views.len() <= n.div_ceil(8));
+    let psnr = test["mean_psnr"].as_f64().unwrap();
+    assert!(psnr.is_finite() && psnr > 10.0, "held-out PSNR {psnr}");
+    let renders = first["train"]["test_renders"].as_array().unwrap();
+    assert_eq!(renders.len(), views.len());
+    for r in renders {
+        assert!(Path::new(r.as_str().unwrap()).is_file());
+    }
+    for f in ["splats_clean.ply", "report.html", "manifests/report.json"] {
         assert!(out.join(f).is_file(), "{f} missing");
     }
-    // The user's folder is never written to.
-    assert!(!scene.join("masks").exists());
-    let psnr = first["train"]["test"]["mean_psnr"].as_f64().unwrap();
-    assert!(psnr.is_finite() && psnr > 10.0, "held-out PSNR {psnr}");
+    let html = std::fs::read_to_string(out.join("report.html")).unwrap();
+    assert!(html.contains("COLMAP") && html.contains("Held-out"));
 
-    let second = romosplat(&args);
-    for stage in ["frames", "mask", "pose", "train", "export", "report"] {
-        assert_eq!(
-            second["stages"][stage], false,
-            "{stage} should be up to date"
-        );
-    }
-    let mut from = args.to_vec();
-    from.extend(["--from", "export"]);
-    let third = romosplat(&from);
-    assert_eq!(third["stages"]["train"], false);
-    assert_eq!(third["stages"]["export"], true);
-    assert_eq!(third["stages"]["report"], true);
+    // Touching the video and the options file without changing them reruns
+    // nothing (they are hashed); the recorded results come back from the
+    // manifests.
+    set_mtime(&video, SystemTime::now() + Duration::from_secs(30));
+    set_mtime(&romo_json, SystemTime::now() + Duration::from_secs(30));
+    let again = romosplat(&args);
+    assert!(ran(&again).is_empty(), "{:?}", ran(&again));
+    assert_eq!(again["pose"]["registered"], first["pose"]["registered"]);
+    assert!(again["seconds"].as_f64().unwrap() < 5.0);
+}
+
+#[test]
+fn run_scene_without_a_split_reruns_what_changed() {
+    let dir = tempfile::tempdir().unwrap();
+    let (small, train) = small_scene(dir.path());
+    // 12 frames, no masks (the video test runs the mask stage): frames 0
+    // and 8 are held out.
+    let scene = dir.path().join("scene");
+    scene_without_split(&small, &scene, &train[..12]);
+    let out = dir.path().join("out");
+    let run_on = |scene: &Path, extra: &[&str]| {
+        let mut a = vec![
+            "run",
+            "--scene",
+            scene.to_str().unwrap(),
+            "--keep-poses",
+            "--no-masks",
+            "--backend",
+            "cpu",
+            "--out",
+            out.to_str().unwrap(),
+        ];
+        if !extra.contains(&"--steps") {
+            a.extend(["--steps", "20"]);
+        }
+        a.extend_from_slice(extra);
+        romosplat(&a)
+    };
+    let run = |extra: &[&str]| run_on(&scene, extra);
+    let all = ["frames", "train", "export", "report"];
+
+    let first = run(&[]);
+    assert_eq!(ran(&first), all);
+    assert_eq!(first["stages"]["pose"]["status"], "kept the scene's poses");
+    assert_eq!(first["stages"]["mask"]["status"], "skipped (--no-masks)");
+    assert_eq!(first["train"]["test"]["views"].as_array().unwrap().len(), 2);
+    assert_eq!(first["train"]["train_views"], 10);
+    // The user's folder is never written to.
+    assert!(!scene.join("masks").exists() && !scene.join("split.json").exists());
+
+    // Nothing changed: no stage runs, and it says so quickly.
+    let same = run(&[]);
+    assert!(ran(&same).is_empty(), "{:?}", ran(&same));
+    assert_eq!(same["stages"]["train"]["status"], "up to date");
+    assert!(same["seconds"].as_f64().unwrap() < 5.0);
+    assert_eq!(
+        same["train"]["test"]["mean_psnr"],
+        first["train"]["test"]["mean_psnr"]
+    );
+
+    // An option: train, export and report only.
+    assert_eq!(ran(&run(&["--steps", "30"])), ["train", "export", "report"]);
+    // --from.
+    assert_eq!(
+        ran(&run(&["--steps", "30", "--from", "export"])),
+        ["export", "report"]
+    );
+
+    // The version recorded in a manifest.
+    let m = out.join("manifests/export.json");
+    let mut v: serde_json::Value =
+        serde_json::from_str(&std::fs::read_to_string(&m).unwrap()).unwrap();
+    v["version"] = "0.0.0-older".into();
+    std::fs::write(&m, v.to_string()).unwrap();
+    assert_eq!(ran(&run(&["--steps", "30"])), ["export", "report"]);
+
+    // An input file (a frame rewritten): everything.
+    let frame = scene.join("images").join(&train[3]);
+    set_mtime(&frame, SystemTime::now() + Duration::from_secs(60));
+    assert_eq!(ran(&run(&["--steps", "30"])), all);
+
+    // A different scene in the same --out: everything, on its frames.
+    let other = dir.path().join("other");
+    scene_without_split(&small, &other, &train[4..20]);
+    let o = run_on(&other, &["--steps", "30"]);
+    assert_eq!(ran(&o), all);
+    assert_eq!(o["frames"]["frames"], 16);
+    assert_eq!(o["train"]["train_views"], 14);
+}
+
+#[test]
+fn preflight_rejects_before_any_stage() {
+    let dir = tempfile::tempdir().unwrap();
+    let out = dir.path().join("out");
+    let video = dir.path().join("v.mp4");
+    std::fs::write(&video, b"not a video").unwrap();
+    let r = romosplat_raw(&[
+        "run",
+        "--video",
+        video.to_str().unwrap(),
+        "--keep-poses",
+        "--colmap",
+        "/nonexistent/colmap",
+        "--ffmpeg",
+        "/nonexistent/ffmpeg",
+        "--out",
+        out.to_str().unwrap(),
+    ]);
+    assert!(!r.status.success());
+    let err = String::from_utf8_lossy(&r.stderr);
+    assert!(err.contains("--keep-poses needs --scene"), "{err}");
+    assert!(
+        err.contains("ffmpeg (`/nonexistent/ffmpeg`) does not run"),
+        "{err}"
+    );
+    // --keep-poses (wrongly) given: colmap is not needed, so not named.
+    assert!(!err.contains("colmap (`"), "{err}");
+    assert!(!out.join("scene").exists(), "a stage ran");
+
+    let r = romosplat_raw(&[
+        "run",
+        "--video",
+        video.to_str().unwrap(),
+        "--colmap",
+        "/nonexistent/colmap",
+        "--out",
+        out.to_str().unwrap(),
+    ]);
+    let err = String::from_utf8_lossy(&r.stderr);
+    assert!(!r.status.success());
+    assert!(
+        err.contains("colmap (`/nonexistent/colmap`) does not run"),
+        "{err}"
+    );
+    assert!(!out.join("scene").exists(), "a stage ran");
 }

@@ -7,6 +7,7 @@
 //! frames) — evaluated on the clean held-out views. One table at the end,
 //! `report.html` beside it.
 
+use super::train_common::{VariantResult, short_schedule, train_and_eval};
 use crate::Ctx;
 use crate::report::{self, Chart, Figure, Report, Series, Table};
 use anyhow::{Context, Result, bail};
@@ -31,8 +32,8 @@ pub struct Args {
     #[arg(long)]
     pub steps: Option<usize>,
     /// Training backend.
-    #[arg(long, default_value = "auto")]
-    pub backend: String,
+    #[arg(long, value_enum, default_value_t = super::train::BackendKind::Auto)]
+    pub backend: super::train::BackendKind,
     /// COLMAP runs on every Nth training frame (default: 3, quick: 2); CPU
     /// COLMAP on all 90 demo frames takes tens of minutes on 2 cores.
     #[arg(long)]
@@ -224,44 +225,77 @@ fn run_pose(
     ))
 }
 
-/// `romosplat train` options for a short run: INRIA's schedule (SH degree
-/// +1 every 1000 of 30k steps, densify from 500 every 100 until 15k, opacity
-/// reset every 3000) compressed to `steps`, so a 300- or 2000-step demo run
-/// densifies and reaches SH degree 3 too; splats capped at 20k (≤ 500 steps)
-/// or 60k so four variants fit the demo's time budget.
-fn schedule_args(steps: usize, downscale: u32) -> Vec<String> {
-    let s = steps.max(1);
-    // Densify 4–8 times: each round needs view-space gradients accumulated
-    // over many views, and more rounds multiply the splat count (and step
-    // time) without a matching gain in a short run.
-    let every = (s / 8).clamp(1, 250);
-    let from = every;
-    let until = s * 3 / 4;
-    let sh_every = (s / 8).max(1);
-    let cap = if s <= 500 { 20_000 } else { 60_000 };
-    [
-        ("--max-splats", cap.to_string()),
-        ("--downscale", downscale.to_string()),
-        ("--densify-from", from.to_string()),
-        ("--densify-every", every.to_string()),
-        ("--densify-until", until.to_string()),
-        ("--opacity-reset-every", "0".to_string()),
-        ("--sh-degree-every", sh_every.to_string()),
-    ]
-    .into_iter()
-    .flat_map(|(k, v)| [k.to_string(), v])
-    .collect()
+/// What step 1 made: the scene and its split, and the video folder.
+struct DemoScene {
+    name: String,
+    dir: PathBuf,
+    /// Training (clutter) and held-out (extra) frame names.
+    train: Vec<String>,
+    test: Vec<String>,
+    /// Only the training frames: what RoMo and COLMAP see.
+    video: PathBuf,
 }
 
-/// Run the demo.
+/// What step 2 made.
+struct DemoMasks {
+    metrics: romo::metrics::MaskMetrics,
+    /// Ground-truth keep masks (COLMAP convention) of the video frames.
+    gt_masks: PathBuf,
+}
+
+/// Run the demo: one function per numbered step.
 pub fn run(args: &Args, ctx: &Ctx) -> Result<serde_json::Value> {
     let out = &args.out;
     std::fs::create_dir_all(out).with_context(|| format!("creating {}", out.display()))?;
     let mut timings: Vec<(String, f64)> = Vec::new();
     let mut summary = serde_json::Map::new();
 
-    // 1. The scene.
     let t0 = Instant::now();
+    let scene = generate_scene(args, ctx, &mut summary)?;
+    timings.push(("generate scene".into(), t0.elapsed().as_secs_f64()));
+
+    let t0 = Instant::now();
+    let masks = romo_masks(&scene, &out.join("gt_masks"), ctx, &mut summary)?;
+    timings.push(("RoMo masks".into(), t0.elapsed().as_secs_f64()));
+
+    let t0 = Instant::now();
+    let pose_rows = colmap_runs(args, &scene, &masks, ctx, &mut summary)?;
+    if !args.no_pose {
+        timings.push(("COLMAP (3 runs)".into(), t0.elapsed().as_secs_f64()));
+    }
+
+    let (steps, views) = train_variants(args, &scene, &masks, ctx, &mut timings)?;
+
+    let tables = result_tables(&scene, &masks, &pose_rows, &views, steps);
+    for t in &tables {
+        print_table(ctx, t);
+    }
+    let report_path = write_report(out, &scene, timings, tables, &views)?;
+    ctx.info(format!("report: {}", report_path.display()));
+    summary.insert(
+        "views".into(),
+        views
+            .iter()
+            .map(|(l, r)| {
+                (
+                    l.clone(),
+                    json!({ "psnr": r.psnr, "ssim": r.ssim, "splats": r.splats }),
+                )
+            })
+            .collect::<serde_json::Map<_, _>>()
+            .into(),
+    );
+    summary.insert("report".into(), json!(report_path));
+    Ok(summary.into())
+}
+
+/// 1. Generate the scene (kept when its spec is unchanged) and the video folder.
+fn generate_scene(
+    args: &Args,
+    ctx: &Ctx,
+    summary: &mut serde_json::Map<String, serde_json::Value>,
+) -> Result<DemoScene> {
+    let out = &args.out;
     let spec_text = if args.quick { SMALL_TOML } else { DEMO_TOML };
     let spec_path = out.join("scene.toml");
     std::fs::write(&spec_path, spec_text)?;
@@ -290,142 +324,175 @@ pub fn run(args: &Args, ctx: &Ctx) -> Result<serde_json::Value> {
             scene_dir.display()
         ));
     }
-    timings.push(("generate scene".into(), t0.elapsed().as_secs_f64()));
     let scene = loader::scene::Scene::load(&scene_dir, &Default::default())?;
     let (train, test) = split_names(&scene)?;
     let video = out.join("video");
     make_video_dir(&scene_dir, &video, &train)?;
+    Ok(DemoScene {
+        name: spec.name,
+        dir: scene_dir,
+        train,
+        test,
+        video,
+    })
+}
 
-    // 2. RoMo masks, and J against the exact moving-pixel ground truth.
+/// 2. RoMo masks on the video frames, and J against the exact ground truth.
+fn romo_masks(
+    scene: &DemoScene,
+    gt_masks: &Path,
+    ctx: &Ctx,
+    summary: &mut serde_json::Map<String, serde_json::Value>,
+) -> Result<DemoMasks> {
     let t0 = Instant::now();
-    ctx.info(format!("[2/5] RoMo motion masks on {} frames", train.len()));
-    let video_scene = loader::scene::Scene::load(&video, &Default::default())?;
+    ctx.info(format!(
+        "[2/5] RoMo motion masks on {} frames",
+        scene.train.len()
+    ));
     let romo_opts = romo::RomoOptions {
         overlays: true,
         ..Default::default()
     };
-    let pb = ctx.progress(train.len() as u64, "mask");
-    let romo_report = romo::segment_scene(&video_scene, &romo_opts, &|stage, i, n| {
-        pb.set_length(n as u64);
-        pb.set_position(i as u64);
-        pb.set_message(stage.to_string());
-    })?;
-    pb.finish_and_clear();
-    let mask_metrics =
-        romo::metrics::evaluate_masks(&video.join("masks"), &video.join("gt_motion"))?;
-    timings.push(("RoMo masks".into(), t0.elapsed().as_secs_f64()));
+    let report = super::mask::segment(&scene.video, 1, &romo_opts, ctx)?;
+    let video = &scene.video;
+    let metrics = romo::metrics::evaluate_masks(&video.join("masks"), &video.join("gt_motion"))?;
     ctx.info(format!(
         "      J = {:.3}, precision {:.3}, recall {:.3} ({:.1} s)",
-        mask_metrics.j_mean,
-        mask_metrics.precision,
-        mask_metrics.recall,
+        metrics.j_mean,
+        metrics.precision,
+        metrics.recall,
         t0.elapsed().as_secs_f64()
     ));
-    summary.insert("romo".into(), serde_json::to_value(&romo_report)?);
-    summary.insert("mask_metrics".into(), serde_json::to_value(&mask_metrics)?);
-    let gt_masks = out.join("gt_masks");
-    fresh_dir(&gt_masks)?;
+    summary.insert("romo".into(), serde_json::to_value(&report)?);
+    summary.insert("mask_metrics".into(), serde_json::to_value(&metrics)?);
+    fresh_dir(gt_masks)?;
     pose::gt_masks::masks_from_gt_motion(
         &video.join("images"),
         &video.join("gt_motion"),
-        &gt_masks,
+        gt_masks,
     )?;
+    Ok(DemoMasks {
+        metrics,
+        gt_masks: gt_masks.to_path_buf(),
+    })
+}
 
-    // 3. COLMAP: unmasked, RoMo masks, ground-truth masks.
+/// 3. COLMAP on every `--pose-stride`th video frame: unmasked, RoMo masks,
+/// ground-truth masks; ATE against the generator's poses.
+fn colmap_runs(
+    args: &Args,
+    scene: &DemoScene,
+    masks: &DemoMasks,
+    ctx: &Ctx,
+    summary: &mut serde_json::Map<String, serde_json::Value>,
+) -> Result<Vec<PoseRow>> {
     let mut pose_rows = Vec::new();
     if args.no_pose {
         ctx.info("[3/5] COLMAP skipped (--no-pose)");
-    } else {
-        let t0 = Instant::now();
-        let stride = args
-            .pose_stride
-            .unwrap_or(if args.quick { 2 } else { 3 })
-            .max(1);
-        let pose_names: Vec<String> = train.iter().step_by(stride).cloned().collect();
-        let pose_dir = out.join("pose_frames");
-        for sub in ["images", "masks_romo", "masks_gt"] {
-            fresh_dir(&pose_dir.join(sub))?;
-        }
-        for n in &pose_names {
-            let m = format!("{n}.png");
-            link(
-                &video.join("images").join(n),
-                &pose_dir.join("images").join(n),
-            )?;
-            link(
-                &video.join("masks").join(&m),
-                &pose_dir.join("masks_romo").join(&m),
-            )?;
-            link(&gt_masks.join(&m), &pose_dir.join("masks_gt").join(&m))?;
-        }
-        let gt_traj: Vec<pose::NamedPose> =
-            pose::trajectory::from_colmap(&scene_dir.join("sparse/0"))?
-                .into_iter()
-                .filter(|p| pose_names.iter().any(|n| n == &p.name))
-                .collect();
-        let mut pose_json = serde_json::Map::new();
-        let runs: [(&str, &str, Option<PathBuf>); 3] = [
-            ("nomask", "no masks", None),
-            ("romo", "RoMo masks", Some(pose_dir.join("masks_romo"))),
-            ("gt", "ground-truth masks", Some(pose_dir.join("masks_gt"))),
-        ];
-        for (key, label, masks) in runs {
-            ctx.info(format!("[3/5] COLMAP with {label}"));
-            let (j, mut row, secs) = run_pose(
-                ctx,
-                args,
-                &pose_dir,
-                &out.join("pose").join(key),
-                masks.as_deref(),
-                &gt_traj,
-            )?;
-            row.label = label.to_string();
-            ctx.info(format!(
-                "      registered {}, ATE {} ({secs:.1} s)",
-                row.registered,
-                row.ate.map_or("-".into(), |a| format!("{a:.4}"))
-            ));
-            pose_json.insert(key.into(), j);
-            pose_rows.push(row);
-        }
-        summary.insert("pose".into(), pose_json.into());
-        timings.push(("COLMAP (3 runs)".into(), t0.elapsed().as_secs_f64()));
+        return Ok(pose_rows);
     }
+    let out = &args.out;
+    let video = &scene.video;
+    let stride = args
+        .pose_stride
+        .unwrap_or(if args.quick { 2 } else { 3 })
+        .max(1);
+    let pose_names: Vec<String> = scene.train.iter().step_by(stride).cloned().collect();
+    let pose_dir = out.join("pose_frames");
+    for sub in ["images", "masks_romo", "masks_gt"] {
+        fresh_dir(&pose_dir.join(sub))?;
+    }
+    for n in &pose_names {
+        let m = format!("{n}.png");
+        link(
+            &video.join("images").join(n),
+            &pose_dir.join("images").join(n),
+        )?;
+        link(
+            &video.join("masks").join(&m),
+            &pose_dir.join("masks_romo").join(&m),
+        )?;
+        link(
+            &masks.gt_masks.join(&m),
+            &pose_dir.join("masks_gt").join(&m),
+        )?;
+    }
+    let gt_traj: Vec<pose::NamedPose> = pose::trajectory::from_colmap(&scene.dir.join("sparse/0"))?
+        .into_iter()
+        .filter(|p| pose_names.iter().any(|n| n == &p.name))
+        .collect();
+    let mut pose_json = serde_json::Map::new();
+    let runs: [(&str, &str, Option<PathBuf>); 3] = [
+        ("nomask", "no masks", None),
+        ("romo", "RoMo masks", Some(pose_dir.join("masks_romo"))),
+        ("gt", "ground-truth masks", Some(pose_dir.join("masks_gt"))),
+    ];
+    for (key, label, masks) in runs {
+        ctx.info(format!("[3/5] COLMAP with {label}"));
+        let (j, mut row, secs) = run_pose(
+            ctx,
+            args,
+            &pose_dir,
+            &out.join("pose").join(key),
+            masks.as_deref(),
+            &gt_traj,
+        )?;
+        row.label = label.to_string();
+        ctx.info(format!(
+            "      registered {}, ATE {} ({secs:.1} s)",
+            row.registered,
+            row.ate.map_or("-".into(), |a| format!("{a:.4}"))
+        ));
+        pose_json.insert(key.into(), j);
+        pose_rows.push(row);
+    }
+    summary.insert("pose".into(), pose_json.into());
+    Ok(pose_rows)
+}
 
-    // 4. + 5. Training on the ground-truth poses, four ways, evaluated on the clean held-out views.
-    let steps = args.steps.unwrap_or(if args.quick { 200 } else { 800 });
+/// 4. + 5. Train on the ground-truth poses four ways, each scored on the
+/// clean held-out views. Returns the step count and one result per variant.
+fn train_variants(
+    args: &Args,
+    scene: &DemoScene,
+    masks: &DemoMasks,
+    ctx: &Ctx,
+    timings: &mut Vec<(String, f64)>,
+) -> Result<(u32, Vec<(String, VariantResult)>)> {
+    let steps = args.steps.unwrap_or(if args.quick { 200 } else { 800 }) as u32;
     let downscale = args
         .downscale
         .unwrap_or(if args.quick { 2 } else { 4 })
         .max(1);
-    let names = (train.as_slice(), test.as_slice());
-    let mut view_rows: Vec<(String, crate::cmd::train_common::VariantResult)> = Vec::new();
+    let names = (scene.train.as_slice(), scene.test.as_slice());
+    let mut views: Vec<(String, VariantResult)> = Vec::new();
     for (i, (key, label)) in VARIANTS.iter().enumerate() {
         let t0 = Instant::now();
-        let dir = out.join("train").join(key);
-        let (src, masks): (PathBuf, Option<PathBuf>) = match *key {
-            "nomask" => (scene_dir.join("images"), None),
-            "romo" => (scene_dir.join("images"), Some(video.join("masks"))),
-            "gt" => (scene_dir.join("images"), Some(gt_masks.clone())),
-            _ => (scene_dir.join("clean"), None),
+        let dir = args.out.join("train").join(key);
+        let (src, variant_masks): (PathBuf, Option<PathBuf>) = match *key {
+            "nomask" => (scene.dir.join("images"), None),
+            "romo" => (scene.dir.join("images"), Some(scene.video.join("masks"))),
+            "gt" => (scene.dir.join("images"), Some(masks.gt_masks.clone())),
+            _ => (scene.dir.join("clean"), None),
         };
-        make_variant_dir(&scene_dir, &dir, &src, masks.as_deref(), names)?;
+        make_variant_dir(&scene.dir, &dir, &src, variant_masks.as_deref(), names)?;
         ctx.info(format!(
             "[4/5] training {label} ({steps} steps, variant {}/4)",
             i + 1
         ));
-        let mut extra = schedule_args(steps, downscale);
-        if masks.is_none() {
-            extra.push("--no-masks".into());
-        }
-        let res = crate::cmd::train_common::train_and_eval(
-            ctx,
-            &dir,
-            &dir.join("out"),
-            steps,
-            &args.backend,
-            &extra,
-        )?;
+        let job = super::train::TrainJob {
+            scene: dir.clone(),
+            poses: None,
+            downscale,
+            holdout_every: 0,
+            backend: args.backend,
+            sparse_adam: false,
+            resume: None,
+            out: dir.join("out"),
+            test_renders: None,
+            opts: short_schedule(steps, variant_masks.is_some()),
+        };
+        let res = train_and_eval(ctx, &job)?;
         ctx.info(format!(
             "      test PSNR {:.2} dB, SSIM {:.4} ({:.1} s)",
             res.psnr,
@@ -433,12 +500,21 @@ pub fn run(args: &Args, ctx: &Ctx) -> Result<serde_json::Value> {
             t0.elapsed().as_secs_f64()
         ));
         timings.push((format!("train {label}"), t0.elapsed().as_secs_f64()));
-        view_rows.push((label.to_string(), res));
+        views.push((label.to_string(), res));
     }
+    Ok((steps, views))
+}
 
-    // The table.
-    let mut tables = Vec::new();
-    let mask_table = Table {
+/// The result tables: masks, poses, held-out views.
+fn result_tables(
+    scene: &DemoScene,
+    masks: &DemoMasks,
+    pose_rows: &[PoseRow],
+    views: &[(String, VariantResult)],
+    steps: u32,
+) -> Vec<Table> {
+    let m = &masks.metrics;
+    let mut tables = vec![Table {
         caption: "Motion masks (RoMo vs exact ground truth)".into(),
         header: vec![
             "frames".into(),
@@ -448,14 +524,13 @@ pub fn run(args: &Args, ctx: &Ctx) -> Result<serde_json::Value> {
             "recall".into(),
         ],
         rows: vec![vec![
-            train.len().to_string(),
-            format!("{:.3}", mask_metrics.j_mean),
-            format!("{:.3}", mask_metrics.j_recall),
-            format!("{:.3}", mask_metrics.precision),
-            format!("{:.3}", mask_metrics.recall),
+            scene.train.len().to_string(),
+            format!("{:.3}", m.j_mean),
+            format!("{:.3}", m.j_recall),
+            format!("{:.3}", m.precision),
+            format!("{:.3}", m.recall),
         ]],
-    };
-    tables.push(mask_table);
+    }];
     if !pose_rows.is_empty() {
         tables.push(Table {
             caption: "Poses (COLMAP vs generator ground truth, Sim(3)-aligned)".into(),
@@ -481,7 +556,7 @@ pub fn run(args: &Args, ctx: &Ctx) -> Result<serde_json::Value> {
     tables.push(Table {
         caption: format!(
             "Held-out clean views ({} views, {steps} steps, ground-truth poses)",
-            test.len()
+            scene.test.len()
         ),
         header: vec![
             "training".into(),
@@ -490,7 +565,7 @@ pub fn run(args: &Args, ctx: &Ctx) -> Result<serde_json::Value> {
             "splats".into(),
             "seconds".into(),
         ],
-        rows: view_rows
+        rows: views
             .iter()
             .map(|(l, r)| {
                 vec![
@@ -503,61 +578,61 @@ pub fn run(args: &Args, ctx: &Ctx) -> Result<serde_json::Value> {
             })
             .collect(),
     });
-    for t in &tables {
-        print_table(ctx, t);
-    }
+    tables
+}
 
-    // Report.
+/// The report: timings, tables, curves, contact sheet, held-out renders.
+fn write_report(
+    out: &Path,
+    scene: &DemoScene,
+    timings: Vec<(String, f64)>,
+    tables: Vec<Table>,
+    views: &[(String, VariantResult)],
+) -> Result<PathBuf> {
     let mut rep = Report {
-        title: format!("romosplat demo — {}", spec.name),
+        title: format!("romosplat demo — {}", scene.name),
         timings,
         tables,
         ..Default::default()
     };
-    rep.charts.push(Chart {
-        title: "training loss".into(),
-        x_label: "step".into(),
-        y_label: "loss".into(),
-        series: view_rows
-            .iter()
-            .map(|(l, r)| Series {
-                name: l.clone(),
-                points: r.loss_curve.clone(),
-            })
-            .collect(),
-    });
-    rep.charts.push(Chart {
-        title: "training PSNR".into(),
-        x_label: "step".into(),
-        y_label: "dB".into(),
-        series: view_rows
-            .iter()
-            .map(|(l, r)| Series {
-                name: l.clone(),
-                points: r.psnr_curve.clone(),
-            })
-            .collect(),
-    });
-    let step = (train.len() / 8).max(1);
-    for n in train.iter().step_by(step).take(8) {
-        let img = image::open(video.join("images").join(n))
+    for (title, y_label, pick) in [("training loss", "loss", 0), ("training PSNR", "dB", 1)] {
+        rep.charts.push(Chart {
+            title: title.into(),
+            x_label: "step".into(),
+            y_label: y_label.into(),
+            series: views
+                .iter()
+                .map(|(l, r)| Series {
+                    name: l.clone(),
+                    points: if pick == 0 {
+                        r.loss_curve.clone()
+                    } else {
+                        r.psnr_curve.clone()
+                    },
+                })
+                .collect(),
+        });
+    }
+    let step = (scene.train.len() / 8).max(1);
+    for n in scene.train.iter().step_by(step).take(8) {
+        let img = image::open(scene.video.join("images").join(n))
             .with_context(|| format!("{}: cannot read", n))?
             .to_rgb8();
-        let mask = image::open(video.join("masks").join(format!("{n}.png")))?.to_luma8();
+        let mask = image::open(scene.video.join("masks").join(format!("{n}.png")))?.to_luma8();
         let over = report::thumbnail(&report::overlay_mask(&img, &mask), 320);
         rep.contact_sheet.push(Figure {
             caption: n.clone(),
             png: report::png_rgb8(&over)?,
         });
     }
-    for (vi, n) in test.iter().enumerate().take(3) {
+    for (vi, n) in scene.test.iter().enumerate().take(3) {
         let mut row = vec![];
-        let gt = image::open(scene_dir.join("images").join(n))?.to_rgb8();
+        let gt = image::open(scene.dir.join("images").join(n))?.to_rgb8();
         row.push(Figure {
             caption: format!("{n}: ground truth"),
             png: report::png_rgb8(&report::thumbnail(&gt, 320))?,
         });
-        for (l, r) in &view_rows {
+        for (l, r) in views {
             if let Some(p) = r.renders.get(vi) {
                 let img = image::open(p)?.to_rgb8();
                 row.push(Figure {
@@ -570,22 +645,7 @@ pub fn run(args: &Args, ctx: &Ctx) -> Result<serde_json::Value> {
     }
     let report_path = out.join("report.html");
     rep.write(&report_path)?;
-    ctx.info(format!("report: {}", report_path.display()));
-    summary.insert(
-        "views".into(),
-        view_rows
-            .iter()
-            .map(|(l, r)| {
-                (
-                    l.clone(),
-                    json!({ "psnr": r.psnr, "ssim": r.ssim, "splats": r.splats }),
-                )
-            })
-            .collect::<serde_json::Map<_, _>>()
-            .into(),
-    );
-    summary.insert("report".into(), json!(report_path));
-    Ok(summary.into())
+    Ok(report_path)
 }
 
 /// Print a table on stderr with aligned columns.

@@ -119,31 +119,76 @@ fn scene_geometry(dir: &Path) -> anyhow::Result<SceneGeometry> {
     Ok(geo)
 }
 
+/// An export, typed: what [`export_splats`] needs.
+#[derive(Debug, Clone)]
+pub struct ExportJob {
+    /// Input splats (.ply, .spz or .splat).
+    pub splats: PathBuf,
+    pub format: ExportFormat,
+    /// Output file (written atomically).
+    pub out: PathBuf,
+    /// Clean first with these options.
+    pub clean: Option<CleanOptions>,
+    /// Scene or COLMAP model folder for the clean pass's cameras and points.
+    pub scene: Option<PathBuf>,
+    pub options: ExportOptions,
+}
+
+/// What [`export_splats`] wrote.
+#[derive(Debug, Clone, serde::Serialize, serde::Deserialize)]
+pub struct ExportOutcome {
+    pub export: export::ExportSummary,
+    pub clean: Option<export::CleanReport>,
+}
+
 /// Run `romosplat export`.
 pub fn run(args: &Args, ctx: &Ctx) -> anyhow::Result<serde_json::Value> {
-    let format = output_format(&args.out, args.format.map(ExportFormat::from))?;
-    let mut splats = splat::io::read_splats(&args.splats)?;
+    Ok(serde_json::to_value(export_splats(&args.job()?, ctx)?)?)
+}
+
+impl Args {
+    /// The typed job these flags describe.
+    pub fn job(&self) -> anyhow::Result<ExportJob> {
+        let args = self;
+        let format = output_format(&args.out, args.format.map(ExportFormat::from))?;
+        let mut options = ExportOptions::default();
+        options.spz.version = args.spz_version;
+        options.spz.convert_axes = !args.keep_axes;
+        options.glb.to_gltf_axes = !args.keep_axes;
+        Ok(ExportJob {
+            splats: args.splats.clone(),
+            format,
+            out: args.out.clone(),
+            clean: args.clean.then(|| CleanOptions {
+                min_opacity: args.min_opacity,
+                max_scale_over_median: args.max_scale_over_median,
+                max_scale_extent_fraction: args.max_scale_extent_fraction,
+                max_footprint: args.max_footprint,
+                bounds_margin: args.bounds_margin,
+                ..CleanOptions::default()
+            }),
+            scene: args.scene.clone(),
+            options,
+        })
+    }
+}
+
+/// Read, optionally clean, and write splats.
+pub fn export_splats(job: &ExportJob, ctx: &Ctx) -> anyhow::Result<ExportOutcome> {
+    let mut splats = splat::io::read_splats(&job.splats)?;
     ctx.info(format!(
         "read {} splats (SH degree {}) from {}",
         splats.len(),
         splats.sh_degree,
-        args.splats.display()
+        job.splats.display()
     ));
     let mut clean_report = None;
-    if args.clean {
-        let opts = CleanOptions {
-            min_opacity: args.min_opacity,
-            max_scale_over_median: args.max_scale_over_median,
-            max_scale_extent_fraction: args.max_scale_extent_fraction,
-            max_footprint: args.max_footprint,
-            bounds_margin: args.bounds_margin,
-            ..CleanOptions::default()
-        };
-        let scene = match &args.scene {
+    if let Some(opts) = &job.clean {
+        let scene = match &job.scene {
             Some(dir) => scene_geometry(dir)?,
             None => SceneGeometry::default(),
         };
-        let (kept, rep) = export::clean(&splats, &scene, &opts)?;
+        let (kept, rep) = export::clean(&splats, &scene, opts)?;
         ctx.info(format!(
             "clean: kept {} of {}; removed {} transparent, {} unseen{}, {} oversized, {} outside bounds ({})",
             rep.kept,
@@ -162,18 +207,17 @@ pub fn run(args: &Args, ctx: &Ctx) -> anyhow::Result<serde_json::Value> {
         splats = kept;
         clean_report = Some(rep);
     }
-    let mut opts = ExportOptions::default();
-    opts.spz.version = args.spz_version;
-    opts.spz.convert_axes = !args.keep_axes;
-    opts.glb.to_gltf_axes = !args.keep_axes;
-    let summary = export::export(&splats, format, &args.out, &opts)?;
+    let summary = export::export(&splats, job.format, &job.out, &job.options)?;
     ctx.info(format!(
         "wrote {} splats as {} to {} ({} bytes, {:.1} bytes/splat)",
         summary.splats,
-        format,
+        job.format,
         summary.path.display(),
         summary.bytes,
         summary.bytes as f64 / summary.splats.max(1) as f64
     ));
-    Ok(serde_json::json!({ "export": summary, "clean": clean_report }))
+    Ok(ExportOutcome {
+        export: summary,
+        clean: clean_report,
+    })
 }

@@ -3,7 +3,7 @@
 
 use crate::Ctx;
 use anyhow::Context;
-use std::path::PathBuf;
+use std::path::{Path, PathBuf};
 
 /// `romosplat mask ...`
 #[derive(Debug, clap::Args)]
@@ -100,19 +100,21 @@ pub struct Args {
 
 /// Run `romosplat mask`.
 pub fn run(args: &Args, ctx: &Ctx) -> anyhow::Result<serde_json::Value> {
-    let scene = loader::scene::Scene::load(
-        &args.scene,
-        &loader::scene::SceneOptions {
-            downscale: args.downscale,
-        },
-    )
-    .with_context(|| format!("loading scene {}", args.scene.display()))?;
+    let opts = options(args)?;
+    let report = segment(&args.scene, args.downscale, &opts, ctx)?;
+    Ok(serde_json::to_value(&report)?)
+}
+
+/// A `RomoOptions` JSON file (a partial one: missing fields keep their defaults).
+pub fn read_options(path: &Path) -> anyhow::Result<romo::RomoOptions> {
+    let s = std::fs::read_to_string(path).with_context(|| format!("{}", path.display()))?;
+    serde_json::from_str(&s).with_context(|| format!("{}: not a RomoOptions JSON", path.display()))
+}
+
+/// The RoMo options these flags select (`--options` file, then the flags).
+pub fn options(args: &Args) -> anyhow::Result<romo::RomoOptions> {
     let mut opts: romo::RomoOptions = match &args.options {
-        Some(p) => {
-            let s = std::fs::read_to_string(p).with_context(|| format!("{}", p.display()))?;
-            serde_json::from_str(&s)
-                .with_context(|| format!("{}: not a RomoOptions JSON", p.display()))?
-        }
+        Some(p) => read_options(p)?,
         None => romo::RomoOptions::default(),
     };
     opts.iterations = args.iterations;
@@ -156,15 +158,32 @@ pub fn run(args: &Args, ctx: &Ctx) -> anyhow::Result<serde_json::Value> {
     if let Some(m) = &args.onnx_features {
         opts.features = romo::FeatureBackend::Onnx { model: m.clone() };
     }
+    if args.out.is_some() {
+        opts.out = args.out.clone();
+    }
+    Ok(opts)
+}
+
+/// RoMo masks for the scene folder `scene_dir` (frames downscaled by
+/// `downscale` on load), written where `opts.out` says (default the scene).
+pub fn segment(
+    scene_dir: &Path,
+    downscale: u32,
+    opts: &romo::RomoOptions,
+    ctx: &Ctx,
+) -> anyhow::Result<romo::RomoReport> {
+    let scene = loader::scene::Scene::load(scene_dir, &loader::scene::SceneOptions { downscale })
+        .with_context(|| format!("loading scene {}", scene_dir.display()))?;
     // Masks (and overlays, probabilities) are staged and moved into place
     // together: a failure leaves no partial set behind.
-    let out = args.out.clone().unwrap_or_else(|| args.scene.clone());
+    let out = opts.out.clone().unwrap_or_else(|| scene_dir.to_path_buf());
     let stage = loader::io::Staging::new(&out)?;
+    let mut opts = opts.clone();
     opts.out = Some(stage.path().to_path_buf());
     ctx.info(format!(
         "romo: {} frames from {}",
         scene.frames.len(),
-        args.scene.display()
+        scene_dir.display()
     ));
     let pb = ctx.progress(scene.frames.len() as u64, "mask");
     let report = romo::segment_scene(&scene, &opts, &|stage, done, total| {
@@ -192,7 +211,7 @@ pub fn run(args: &Args, ctx: &Ctx) -> anyhow::Result<serde_json::Value> {
         100.0 * moving,
         report.dropped_frames.len()
     ));
-    Ok(serde_json::to_value(&report)?)
+    Ok(report)
 }
 
 /// `--model-selection` values.

@@ -16,6 +16,7 @@ pub mod plan;
 pub mod pose;
 pub mod render;
 pub mod run;
+pub mod run_report;
 pub mod scene;
 pub mod train;
 pub mod train_common;

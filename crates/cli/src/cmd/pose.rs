@@ -195,6 +195,34 @@ pub fn run(args: &Args, ctx: &Ctx) -> anyhow::Result<serde_json::Value> {
         ));
         paths.masks = dir;
     }
+    let report = colmap(&paths, &opts, ctx)
+        .with_context(|| format!("pose stage on {}", args.scene.display()))?;
+    let mut value = serde_json::to_value(&report)?;
+    if let Some(gt) = gt {
+        let pred = pose::trajectory::from_colmap(&paths.out)?;
+        let m = evaluate(&pred, &gt, &PoseMetricsOptions::default())?;
+        ctx.info(format!(
+            "vs ground truth: ATE {:.5} (path length {:.3}), RPE-T {:.5}, RPE-R {:.4}°, {}/{} matched",
+            m.ate.rmse,
+            m.gt_path_length,
+            m.rpe_trans.as_ref().map_or(f64::NAN, |s| s.rmse),
+            m.rpe_rot_deg.as_ref().map_or(f64::NAN, |s| s.rmse),
+            m.registered,
+            m.total
+        ));
+        if let serde_json::Value::Object(map) = &mut value {
+            map.insert("metrics".into(), serde_json::to_value(&m)?);
+        }
+    }
+    Ok(value)
+}
+
+/// Run COLMAP on `paths` with `opts`, showing its progress, and say how it went.
+pub fn colmap(
+    paths: &ColmapPaths,
+    opts: &ColmapOptions,
+    ctx: &Ctx,
+) -> anyhow::Result<pose::ColmapReport> {
     ctx.info(format!(
         "COLMAP on {} ({}, {}, masks: {})",
         paths.images.display(),
@@ -210,7 +238,7 @@ pub fn run(args: &Args, ctx: &Ctx) -> anyhow::Result<serde_json::Value> {
         }
     ));
 
-    let mut bar: Option<indicatif::ProgressBar> = None;
+    let mut bar: Option<crate::ctx::Progress> = None;
     let mut on_progress = |p: Progress| match p {
         Progress::Started { step, index, of } => {
             let pb = ctx.progress(0, &step);
@@ -234,8 +262,7 @@ pub fn run(args: &Args, ctx: &Ctx) -> anyhow::Result<serde_json::Value> {
             ctx.info(format!("  {step}: {seconds:.1} s"));
         }
     };
-    let report = run_colmap(&paths, &opts, &mut on_progress)
-        .with_context(|| format!("pose stage on {}", args.scene.display()))?;
+    let report = run_colmap(paths, opts, &mut on_progress)?;
     ctx.info(format!(
         "registered {}/{} images, {} points, mean reprojection error {:.3} px, {:.1} s; model in {}",
         report.registered,
@@ -260,22 +287,5 @@ pub fn run(args: &Args, ctx: &Ctx) -> anyhow::Result<serde_json::Value> {
             report.models_found, report.model_sizes
         ));
     }
-    let mut value = serde_json::to_value(&report)?;
-    if let Some(gt) = gt {
-        let pred = pose::trajectory::from_colmap(&paths.out)?;
-        let m = evaluate(&pred, &gt, &PoseMetricsOptions::default())?;
-        ctx.info(format!(
-            "vs ground truth: ATE {:.5} (path length {:.3}), RPE-T {:.5}, RPE-R {:.4}°, {}/{} matched",
-            m.ate.rmse,
-            m.gt_path_length,
-            m.rpe_trans.as_ref().map_or(f64::NAN, |s| s.rmse),
-            m.rpe_rot_deg.as_ref().map_or(f64::NAN, |s| s.rmse),
-            m.registered,
-            m.total
-        ));
-        if let serde_json::Value::Object(map) = &mut value {
-            map.insert("metrics".into(), serde_json::to_value(&m)?);
-        }
-    }
-    Ok(value)
+    Ok(report)
 }

@@ -82,6 +82,15 @@ pub fn split_frames(scene: &Scene, split: &str) -> anyhow::Result<Vec<usize>> {
     Ok(idx)
 }
 
+/// A frame name without its extension (`0001.jpg` → `0001`): renders are
+/// named `<stem>.png`.
+pub fn stem(name: &str) -> &str {
+    std::path::Path::new(name)
+        .file_stem()
+        .and_then(|s| s.to_str())
+        .unwrap_or(name)
+}
+
 pub fn run(args: &Args, ctx: &Ctx) -> anyhow::Result<serde_json::Value> {
     let (splats, scene, idx) = args.views.load()?;
     let mut backend = make_backend(args.views.backend, ctx)?;
@@ -97,11 +106,9 @@ pub fn run(args: &Args, ctx: &Ctx) -> anyhow::Result<serde_json::Value> {
         let img = image::Rgb32FImage::from_raw(cam.width, cam.height, out.image)
             .ok_or_else(|| anyhow::anyhow!("render size mismatch"))?;
         // Named by the frame's stem: `0001.jpg` renders to `0001.png`.
-        let name = &scene.frames[i].name;
-        let stem = std::path::Path::new(name)
-            .file_stem()
-            .map_or(name.as_str(), |s| s.to_str().unwrap_or(name));
-        let path = args.out.join(format!("{stem}.png"));
+        let path = args
+            .out
+            .join(format!("{}.png", stem(&scene.frames[i].name)));
         loader::io::write_png_rgb32f(&path, &img)?;
         written.push(path);
         pb.inc(1);

@@ -1,16 +1,22 @@
 //! `romosplat run (--video FILE | --scene DIR) --out DIR`: what a user runs.
 //! frames → RoMo masks → masked COLMAP → masked training → cleaned export →
-//! report. Each stage is skipped when its outputs exist and are newer than
-//! its inputs (a rerun resumes), `--from STAGE` forces a restart from a stage,
-//! and a summary table closes the run. The user's scene folder is never
-//! written to: `DIR/scene` links its images and holds our masks and model.
+//! report, as one table of stages ([`stages`]): each names its inputs, its
+//! outputs, the resolved options that affect its result, the typed function
+//! that runs it, and how its typed result comes back from its manifest when
+//! it is up to date (see [`crate::pipeline`] for freshness). `--from STAGE`
+//! forces a restart from a stage, and a summary table closes the run. The
+//! user's scene folder is never written to: `OUT/scene` links its files and
+//! holds our masks and model.
 
 use super::demo::{link, print_table};
+use super::export::{ExportJob, ExportOutcome, Format};
+use super::train::{BackendKind, TrainJob, TrainOutcome};
+use super::train_common::short_schedule;
 use crate::Ctx;
-use crate::pipeline::{Stage, should_run};
-use crate::report::{self, Chart, Figure, Report, Series, Table};
+use crate::pipeline::{self, Decision, Input, Manifest, Stage};
+use crate::report::Table;
 use anyhow::{Context, Result, bail};
-use clap::Parser;
+use serde::{Deserialize, Serialize};
 use serde_json::json;
 use std::path::{Path, PathBuf};
 use std::time::Instant;
@@ -34,408 +40,623 @@ pub struct Args {
     /// Frames per second to extract from the video (default: every frame).
     #[arg(long)]
     pub fps: Option<f64>,
+    /// The ffmpeg program (name on PATH or path).
+    #[arg(long, default_value = "ffmpeg")]
+    pub ffmpeg: PathBuf,
     /// RoMo rounds (paper: 2).
     #[arg(long, default_value_t = 2)]
     pub iterations: usize,
+    /// Full RoMo options as JSON (a partial `RomoOptions`); --iterations overrides.
+    #[arg(long)]
+    pub mask_options: Option<PathBuf>,
     /// COLMAP matcher: sequential for videos, exhaustive for photo collections.
-    #[arg(long, default_value = "sequential")]
-    pub matcher: String,
+    #[arg(long, value_enum, default_value = "sequential")]
+    pub matcher: super::pose::MatcherArg,
     /// COLMAP camera model.
     #[arg(long, default_value = "SIMPLE_RADIAL")]
     pub camera_model: String,
+    /// The colmap program (name on PATH or path).
+    #[arg(long, default_value = "colmap")]
+    pub colmap: PathBuf,
     /// Use the scene's own `sparse/0` (or transforms.json) poses instead of running COLMAP.
     #[arg(long)]
     pub keep_poses: bool,
     /// Do not use masks anywhere (COLMAP and training): the unmasked baseline.
     #[arg(long)]
     pub no_masks: bool,
-    /// Training steps.
+    /// Training steps (INRIA's schedule compressed to this many steps).
     #[arg(long, default_value_t = 7000)]
-    pub steps: usize,
-    /// Training backend: auto, wgpu or cpu.
-    #[arg(long, default_value = "auto")]
-    pub backend: String,
+    pub steps: u32,
+    /// Training backend.
+    #[arg(long, value_enum, default_value_t = BackendKind::Auto)]
+    pub backend: BackendKind,
     /// Integer downscale of the frames for training.
     #[arg(long, default_value_t = 1)]
     pub downscale: u32,
     /// Hold out every Nth frame for testing when there is no split.json (0 = none).
     #[arg(long, default_value_t = 8)]
     pub holdout_every: usize,
-    /// Export format of the cleaned splats (ply, splat, glb, spz).
-    #[arg(long, default_value = "ply")]
-    pub format: String,
+    /// Export format of the cleaned splats.
+    #[arg(long, value_enum, default_value_t = Format::Ply)]
+    pub format: Format,
 }
 
-#[derive(Debug, Parser)]
-struct Sub<T: clap::Args> {
-    #[command(flatten)]
-    args: T,
+/// Where the frames come from.
+#[derive(Debug, Clone, Serialize)]
+#[serde(rename_all = "lowercase")]
+pub enum Source {
+    /// A video file, extracted with ffmpeg.
+    Video(PathBuf),
+    /// A scene folder, linked.
+    Scene(PathBuf),
 }
 
-fn parse<T: clap::Args + std::fmt::Debug>(argv: &[String]) -> Result<T> {
-    Ok(Sub::<T>::try_parse_from(argv)
-        .with_context(|| format!("options for {}", argv[0]))?
-        .args)
+/// Everything the stages need, resolved from the flags once.
+#[derive(Debug, Clone)]
+pub struct Plan {
+    pub out: PathBuf,
+    /// `OUT/scene`: frames (or links), masks, COLMAP model.
+    pub scene: PathBuf,
+    pub source: Source,
+    pub fps: Option<f64>,
+    pub ffmpeg: PathBuf,
+    pub keep_poses: bool,
+    pub no_masks: bool,
+    pub romo: romo::RomoOptions,
+    /// The `--mask-options` file (a hashed input of the mask stage).
+    pub mask_options: Option<PathBuf>,
+    pub colmap: pose::ColmapOptions,
+    pub train: splat::train::TrainOptions,
+    pub downscale: u32,
+    pub holdout_every: usize,
+    pub backend: BackendKind,
+    pub format: Format,
+    pub clean: splat::export::CleanOptions,
+    pub from: Option<Stage>,
 }
 
-fn s(p: &Path) -> String {
-    p.display().to_string()
-}
+impl Plan {
+    /// Resolve the flags.
+    pub fn new(args: &Args) -> Result<Plan> {
+        let source = match (&args.video, &args.scene) {
+            (Some(v), None) => Source::Video(v.clone()),
+            (None, Some(s)) => Source::Scene(s.clone()),
+            _ => bail!("give exactly one of --video and --scene"),
+        };
+        let mut romo = match &args.mask_options {
+            Some(p) => super::mask::read_options(p)?,
+            None => romo::RomoOptions::default(),
+        };
+        romo.iterations = args.iterations;
+        romo.overlays = true;
+        let camera_model = loader::CameraModel::from_name(&args.camera_model).ok_or_else(|| {
+            anyhow::anyhow!("unknown COLMAP camera model `{}`", args.camera_model)
+        })?;
+        let colmap = pose::ColmapOptions {
+            colmap: args.colmap.clone(),
+            matcher: match args.matcher {
+                super::pose::MatcherArg::Sequential => pose::Matcher::Sequential,
+                super::pose::MatcherArg::Exhaustive => pose::Matcher::Exhaustive,
+            },
+            camera_model,
+            use_masks: !args.no_masks,
+            ..Default::default()
+        };
+        colmap.validate()?;
+        let train = short_schedule(args.steps, !args.no_masks);
+        train.validate()?;
+        Ok(Plan {
+            out: args.out.clone(),
+            scene: args.out.join("scene"),
+            source,
+            fps: args.fps,
+            ffmpeg: args.ffmpeg.clone(),
+            keep_poses: args.keep_poses,
+            no_masks: args.no_masks,
+            romo,
+            mask_options: args.mask_options.clone(),
+            colmap,
+            train,
+            downscale: args.downscale.max(1),
+            holdout_every: args.holdout_every,
+            backend: args.backend,
+            format: args.format,
+            clean: splat::export::CleanOptions::default(),
+            from: args.from,
+        })
+    }
 
-/// Prepare `out/scene`: frames from the video, or links to the user's scene.
-fn prepare_scene(args: &Args, scene: &Path, ctx: &Ctx) -> Result<()> {
-    std::fs::create_dir_all(scene)?;
-    if let Some(video) = &args.video {
-        let images = scene.join("images");
-        if images.exists() {
-            std::fs::remove_dir_all(&images)?;
+    pub fn images(&self) -> PathBuf {
+        self.scene.join("images")
+    }
+    pub fn masks(&self) -> PathBuf {
+        self.scene.join("masks")
+    }
+    pub fn sparse(&self) -> PathBuf {
+        self.scene.join("sparse/0")
+    }
+    /// COLMAP's undistorted PINHOLE copy when it made one, else the scene.
+    pub fn train_scene(&self) -> PathBuf {
+        let u = self.scene.join("undistorted");
+        if u.join("images").is_dir() {
+            u
+        } else {
+            self.scene.clone()
         }
-        let frames = loader::video::extract_frames(video, scene, args.fps)?;
-        ctx.info(format!(
-            "  {} frames from {}",
-            frames.len(),
-            video.display()
-        ));
+    }
+    pub fn train_dir(&self) -> PathBuf {
+        self.out.join("train")
+    }
+    pub fn splats(&self) -> PathBuf {
+        self.train_dir().join("splats.ply")
+    }
+    pub fn export_path(&self) -> PathBuf {
+        let ext = splat::export::ExportFormat::from(self.format).name();
+        self.out.join(format!("splats_clean.{ext}"))
+    }
+    pub fn report_path(&self) -> PathBuf {
+        self.out.join("report.html")
+    }
+}
+
+/// What the frames stage made.
+#[derive(Debug, Clone, Serialize, Deserialize)]
+pub struct FramesOutcome {
+    pub frames: usize,
+    /// The video or scene folder they came from.
+    pub source: PathBuf,
+}
+
+/// What the mask stage made (the summary of RoMo's report the run keeps).
+#[derive(Debug, Clone, Serialize, Deserialize)]
+pub struct MaskOutcome {
+    pub frames: usize,
+    /// Mean fraction of each frame called moving.
+    pub moving_fraction: f64,
+    /// Frames RoMo left out of its MLP training (too few inliers).
+    pub dropped_frames: Vec<String>,
+    /// Flow and feature backends used.
+    pub backends: Vec<String>,
+}
+
+impl MaskOutcome {
+    fn new(rep: &romo::RomoReport) -> Self {
+        let finite: Vec<f64> = rep
+            .frames
+            .iter()
+            .map(|f| f.moving_fraction as f64)
+            .filter(|m| m.is_finite())
+            .collect();
+        MaskOutcome {
+            frames: rep.frames.len(),
+            moving_fraction: finite.iter().sum::<f64>() / finite.len().max(1) as f64,
+            dropped_frames: rep
+                .dropped_frames
+                .iter()
+                .filter_map(|&i| rep.frames.get(i).map(|f| f.name.clone()))
+                .collect(),
+            backends: rep.backends.clone(),
+        }
+    }
+}
+
+/// The typed results of the stages (run now, or restored from their manifests).
+#[derive(Debug, Default)]
+pub struct Results {
+    pub frames: Option<FramesOutcome>,
+    pub mask: Option<MaskOutcome>,
+    pub pose: Option<pose::ColmapReport>,
+    pub train: Option<TrainOutcome>,
+    pub export: Option<ExportOutcome>,
+    /// (stage, seconds) of every stage that has run, now or before.
+    pub timings: Vec<(String, f64)>,
+}
+
+/// One row of the stage table.
+pub struct StageDef {
+    pub stage: Stage,
+    /// `Some(reason)` when the stage does not apply to this run.
+    pub skip: fn(&Plan) -> Option<&'static str>,
+    pub inputs: fn(&Plan) -> Vec<Input>,
+    pub outputs: fn(&Plan) -> Vec<PathBuf>,
+    /// The resolved options that affect the result.
+    pub options: fn(&Plan) -> Result<serde_json::Value>,
+    /// Run the stage; its result is stored in `Results` and returned serialised.
+    pub run: fn(&Plan, &mut Results, &Ctx) -> Result<serde_json::Value>,
+    /// Put a recorded result back into `Results`.
+    pub restore: fn(&mut Results, serde_json::Value) -> Result<()>,
+}
+
+/// The stages, in order.
+pub fn stages() -> [StageDef; 6] {
+    [
+        StageDef {
+            stage: Stage::Frames,
+            skip: |_| None,
+            inputs: |p| match &p.source {
+                Source::Video(v) => vec![Input::Hashed(v.clone())],
+                Source::Scene(s) => {
+                    let mut v = vec![
+                        Input::Stat(s.join("images")),
+                        Input::Stat(s.join("gt_motion")),
+                        Input::Hashed(s.join("split.json")),
+                        Input::Hashed(s.join("transforms.json")),
+                    ];
+                    if p.keep_poses {
+                        v.push(Input::Stat(s.join("sparse/0")));
+                    }
+                    v
+                }
+            },
+            outputs: |p| vec![p.images()],
+            options: |p| {
+                Ok(json!({ "source": p.source, "fps": p.fps, "keep_poses": p.keep_poses }))
+            },
+            run: run_frames,
+            restore: |r, v| {
+                r.frames = Some(serde_json::from_value(v)?);
+                Ok(())
+            },
+        },
+        StageDef {
+            stage: Stage::Mask,
+            skip: |p| p.no_masks.then_some("skipped (--no-masks)"),
+            inputs: |p| {
+                let mut v = vec![Input::Stat(p.images())];
+                v.extend(p.mask_options.iter().cloned().map(Input::Hashed));
+                v
+            },
+            outputs: |p| vec![p.masks()],
+            options: |p| Ok(serde_json::to_value(&p.romo)?),
+            run: |p, r, ctx| {
+                clear(&p.masks())?;
+                clear(&p.scene.join("motion"))?;
+                let rep = MaskOutcome::new(&super::mask::segment(&p.scene, 1, &p.romo, ctx)?);
+                let v = serde_json::to_value(&rep)?;
+                r.mask = Some(rep);
+                Ok(v)
+            },
+            restore: |r, v| {
+                r.mask = Some(serde_json::from_value(v)?);
+                Ok(())
+            },
+        },
+        StageDef {
+            stage: Stage::Pose,
+            skip: |p| p.keep_poses.then_some("kept the scene's poses"),
+            inputs: |p| {
+                let mut v = vec![Input::Stat(p.images())];
+                if !p.no_masks {
+                    v.push(Input::Stat(p.masks()));
+                }
+                v
+            },
+            outputs: |p| vec![p.sparse()],
+            options: |p| Ok(serde_json::to_value(&p.colmap)?),
+            run: |p, r, ctx| {
+                let paths = pose::ColmapPaths::for_scene(&p.scene);
+                let rep = super::pose::colmap(&paths, &p.colmap, ctx)
+                    .with_context(|| format!("pose stage on {}", p.scene.display()))?;
+                let v = serde_json::to_value(&rep)?;
+                r.pose = Some(rep);
+                Ok(v)
+            },
+            restore: |r, v| {
+                r.pose = Some(serde_json::from_value(v)?);
+                Ok(())
+            },
+        },
+        StageDef {
+            stage: Stage::Train,
+            skip: |_| None,
+            inputs: |p| {
+                let t = p.train_scene();
+                let mut v = vec![
+                    Input::Stat(t.join("images")),
+                    Input::Stat(t.join("sparse/0")),
+                    Input::Hashed(t.join("split.json")),
+                    Input::Hashed(t.join("transforms.json")),
+                ];
+                if !p.no_masks {
+                    v.push(Input::Stat(t.join("masks")));
+                }
+                v
+            },
+            outputs: |p| vec![p.splats()],
+            options: |p| {
+                Ok(json!({
+                    "train": p.train,
+                    "downscale": p.downscale,
+                    "holdout_every": p.holdout_every,
+                    "backend": format!("{:?}", p.backend),
+                }))
+            },
+            run: |p, r, ctx| {
+                clear(&p.train_dir())?;
+                let job = TrainJob {
+                    scene: p.train_scene(),
+                    poses: None,
+                    downscale: p.downscale,
+                    holdout_every: p.holdout_every,
+                    backend: p.backend,
+                    sparse_adam: false,
+                    resume: None,
+                    out: p.train_dir(),
+                    test_renders: Some(p.train_dir().join("renders")),
+                    opts: p.train.clone(),
+                };
+                let o = super::train::train(&job, ctx)?;
+                let v = serde_json::to_value(&o)?;
+                r.train = Some(o);
+                Ok(v)
+            },
+            restore: |r, v| {
+                r.train = Some(serde_json::from_value(v)?);
+                Ok(())
+            },
+        },
+        StageDef {
+            stage: Stage::Export,
+            skip: |_| None,
+            inputs: |p| vec![Input::Stat(p.splats())],
+            outputs: |p| vec![p.export_path()],
+            options: |p| Ok(json!({ "format": format!("{:?}", p.format), "clean": p.clean })),
+            run: |p, r, ctx| {
+                let job = ExportJob {
+                    splats: p.splats(),
+                    format: p.format.into(),
+                    out: p.export_path(),
+                    clean: Some(p.clean.clone()),
+                    scene: Some(p.train_scene()),
+                    options: Default::default(),
+                };
+                let o = super::export::export_splats(&job, ctx)?;
+                let v = serde_json::to_value(&o)?;
+                r.export = Some(o);
+                Ok(v)
+            },
+            restore: |r, v| {
+                r.export = Some(serde_json::from_value(v)?);
+                Ok(())
+            },
+        },
+        StageDef {
+            stage: Stage::Report,
+            skip: |_| None,
+            inputs: |p| vec![Input::Stat(p.splats()), Input::Stat(p.export_path())],
+            outputs: |p| vec![p.report_path()],
+            options: |_| Ok(serde_json::Value::Null),
+            run: |p, r, _| {
+                super::run_report::write_report(p, r)?;
+                Ok(json!(p.report_path()))
+            },
+            restore: |_, _| Ok(()),
+        },
+    ]
+}
+
+/// Remove a folder or file we own (stale outputs of an earlier run).
+fn clear(p: &Path) -> Result<()> {
+    let Ok(meta) = p.symlink_metadata() else {
         return Ok(());
+    };
+    if meta.is_dir() {
+        std::fs::remove_dir_all(p)
+    } else {
+        std::fs::remove_file(p)
     }
-    let src = args
-        .scene
-        .as_deref()
-        .context("--scene or --video is required")?;
-    if !src.join("images").is_dir() {
-        bail!("{}: no images/ folder", src.display());
-    }
-    for name in ["images", "gt_motion"] {
-        if src.join(name).is_dir() {
-            link(&src.join(name), &scene.join(name))?;
-        }
-    }
-    for name in ["split.json", "transforms.json"] {
-        if src.join(name).is_file() {
-            link(&src.join(name), &scene.join(name))?;
-        }
-    }
-    if args.keep_poses && src.join("sparse/0").is_dir() {
-        std::fs::create_dir_all(scene.join("sparse"))?;
-        link(&src.join("sparse/0"), &scene.join("sparse/0"))?;
-    }
-    Ok(())
+    .with_context(|| format!("clearing {}", p.display()))
 }
 
-fn status(ran: bool) -> &'static str {
-    if ran { "ran" } else { "up to date" }
+/// Frames: extract the video, or link the user's scene files, into a fresh `OUT/scene`.
+fn run_frames(p: &Plan, r: &mut Results, ctx: &Ctx) -> Result<serde_json::Value> {
+    // New frames invalidate everything made from the old ones (masks, the
+    // COLMAP database and model).
+    clear(&p.scene)?;
+    std::fs::create_dir_all(&p.scene).with_context(|| format!("creating {}", p.scene.display()))?;
+    let outcome = match &p.source {
+        Source::Video(video) => {
+            let program = p.ffmpeg.to_string_lossy();
+            let frames = loader::video::extract_frames_with(&program, video, &p.scene, p.fps)?;
+            ctx.info(format!(
+                "  {} frames from {}",
+                frames.len(),
+                video.display()
+            ));
+            FramesOutcome {
+                frames: frames.len(),
+                source: video.clone(),
+            }
+        }
+        Source::Scene(src) => {
+            if !src.join("images").is_dir() {
+                bail!("{}: no images/ folder", src.display());
+            }
+            for name in ["images", "gt_motion", "split.json", "transforms.json"] {
+                if src.join(name).exists() {
+                    link(&src.join(name), &p.scene.join(name))?;
+                }
+            }
+            if p.keep_poses && src.join("sparse/0").is_dir() {
+                std::fs::create_dir_all(p.scene.join("sparse"))?;
+                link(&src.join("sparse/0"), &p.sparse())?;
+            }
+            let frames = loader::scene::list_images(&src.join("images"))?.len();
+            ctx.info(format!("  {frames} frames linked from {}", src.display()));
+            FramesOutcome {
+                frames,
+                source: src.clone(),
+            }
+        }
+    };
+    let v = serde_json::to_value(&outcome)?;
+    r.frames = Some(outcome);
+    Ok(v)
+}
+
+/// How one stage went in this run.
+#[derive(Debug, Clone, Serialize)]
+pub struct StageRow {
+    pub stage: Stage,
+    /// "ran", "up to date", or why it does not apply.
+    pub status: String,
+    pub ran: bool,
+    /// Why it ran (empty when it did not).
+    pub reason: String,
+    /// Seconds spent in this run.
+    pub seconds: f64,
 }
 
 /// Run the pipeline.
 pub fn run(args: &Args, ctx: &Ctx) -> Result<serde_json::Value> {
-    let out = &args.out;
-    std::fs::create_dir_all(out).with_context(|| format!("creating {}", out.display()))?;
-    let scene = out.join("scene");
-    let mut timings: Vec<(String, f64)> = Vec::new();
-    let mut ran: Vec<(Stage, &str)> = Vec::new();
+    let t_all = Instant::now();
+    crate::preflight::for_run(args, ctx)?;
+    let plan = Plan::new(args)?;
+    std::fs::create_dir_all(&plan.out)
+        .with_context(|| format!("creating {}", plan.out.display()))?;
+    let mut results = Results::default();
+    let rows = run_stages(&plan, &mut results, ctx)?;
+    print_summary(ctx, &plan, &rows, &results, t_all.elapsed().as_secs_f64());
     let mut summary = serde_json::Map::new();
-    let from = args.from;
-    let input: PathBuf = args
-        .video
-        .clone()
-        .or_else(|| args.scene.as_ref().map(|d| d.join("images")))
-        .context("no input")?;
-
-    // frames
-    let t0 = Instant::now();
-    let images = scene.join("images");
-    let go = should_run(
-        Stage::Frames,
-        from,
-        std::slice::from_ref(&images),
-        std::slice::from_ref(&input),
+    summary.insert(
+        "stages".into(),
+        rows.iter()
+            .map(|r| (r.stage.name().to_string(), json!(r)))
+            .collect::<serde_json::Map<_, _>>()
+            .into(),
     );
-    if go {
-        ctx.info("[frames]");
-        prepare_scene(args, &scene, ctx)?;
-    }
-    ran.push((Stage::Frames, status(go)));
-    timings.push(("frames".into(), t0.elapsed().as_secs_f64()));
+    summary.insert(
+        "ran".into(),
+        json!(
+            rows.iter()
+                .filter(|r| r.ran)
+                .map(|r| r.stage.name())
+                .collect::<Vec<_>>()
+        ),
+    );
+    summary.insert("seconds".into(), json!(t_all.elapsed().as_secs_f64()));
+    summary.insert("frames".into(), json!(results.frames));
+    summary.insert("mask".into(), json!(results.mask));
+    summary.insert("pose".into(), json!(results.pose));
+    summary.insert("train".into(), json!(results.train));
+    summary.insert("export".into(), json!(results.export));
+    summary.insert("splats".into(), json!(plan.splats()));
+    summary.insert("export_path".into(), json!(plan.export_path()));
+    summary.insert("report".into(), json!(plan.report_path()));
+    Ok(summary.into())
+}
 
-    // mask
-    let t0 = Instant::now();
-    let masks = scene.join("masks");
-    let go = !args.no_masks
-        && should_run(
-            Stage::Mask,
-            from,
-            std::slice::from_ref(&masks),
-            std::slice::from_ref(&images),
-        );
-    if go {
-        ctx.info("[mask] RoMo motion masks");
-        let m = super::mask::run(
-            &parse::<super::mask::Args>(&[
-                "mask".into(),
-                "--scene".into(),
-                s(&scene),
-                "--iterations".into(),
-                args.iterations.to_string(),
-                "--overlays".into(),
-            ])?,
-            ctx,
-        )?;
-        summary.insert("mask".into(), m);
-    }
-    ran.push((
-        Stage::Mask,
-        if args.no_masks {
-            "skipped (--no-masks)"
-        } else {
-            status(go)
-        },
-    ));
-    timings.push(("mask".into(), t0.elapsed().as_secs_f64()));
-
-    // pose
-    let t0 = Instant::now();
-    let sparse = scene.join("sparse/0");
-    let pose_inputs = if args.no_masks {
-        vec![images.clone()]
-    } else {
-        vec![images.clone(), masks.clone()]
-    };
-    let go = !args.keep_poses
-        && should_run(
-            Stage::Pose,
-            from,
-            std::slice::from_ref(&sparse),
-            &pose_inputs,
-        );
-    if go {
-        ctx.info("[pose] COLMAP");
-        let mut argv = vec![
-            "pose".into(),
-            "--scene".into(),
-            s(&scene),
-            "--matcher".into(),
-            args.matcher.clone(),
-            "--camera-model".into(),
-            args.camera_model.clone(),
-        ];
-        if args.no_masks {
-            argv.push("--no-masks".into());
+/// The stage loop: decide each stage by its fingerprint, run it or restore
+/// its recorded result, and record what ran.
+fn run_stages(plan: &Plan, results: &mut Results, ctx: &Ctx) -> Result<Vec<StageRow>> {
+    let mut rows = Vec::new();
+    let mut earlier_ran: Option<Stage> = None;
+    for def in stages() {
+        let t0 = Instant::now();
+        let stage = def.stage;
+        if let Some(why) = (def.skip)(plan) {
+            rows.push(StageRow {
+                stage,
+                status: why.into(),
+                ran: false,
+                reason: String::new(),
+                seconds: 0.0,
+            });
+            continue;
         }
-        let p = super::pose::run(&parse::<super::pose::Args>(&argv)?, ctx)?;
-        summary.insert("pose".into(), p);
-    }
-    ran.push((
-        Stage::Pose,
-        if args.keep_poses {
-            "kept the scene's poses"
-        } else {
-            status(go)
-        },
-    ));
-    timings.push(("pose".into(), t0.elapsed().as_secs_f64()));
-
-    // train (on the undistorted copy when COLMAP made one)
-    let t0 = Instant::now();
-    let train_scene = if scene.join("undistorted/images").is_dir() {
-        scene.join("undistorted")
-    } else {
-        scene.clone()
-    };
-    let train_out = out.join("train");
-    let ply = train_out.join("splats.ply");
-    let go = should_run(
-        Stage::Train,
-        from,
-        std::slice::from_ref(&ply),
-        &[sparse.clone(), masks.clone(), images.clone()],
-    );
-    let mut result = None;
-    if go {
-        ctx.info(format!("[train] {} steps", args.steps));
-        let mut extra = vec![
-            "--downscale".to_string(),
-            args.downscale.to_string(),
-            "--holdout-every".into(),
-            args.holdout_every.to_string(),
-        ];
-        if args.no_masks {
-            extra.push("--no-masks".into());
+        let recorded = pipeline::read_manifest(&plan.out, stage);
+        let now = pipeline::fingerprint(
+            &(def.inputs)(plan),
+            (def.options)(plan)?,
+            recorded.as_ref().map(|m| &m.fingerprint),
+        )?;
+        let forced = match (plan.from, earlier_ran) {
+            (Some(f), _) if stage >= f => Some(format!("--from {}", f.name())),
+            (_, Some(e)) => Some(format!("{} ran", e.name())),
+            _ => None,
+        };
+        let mut decision = pipeline::decide(
+            recorded.as_ref(),
+            &now,
+            &(def.outputs)(plan),
+            forced.as_deref(),
+        );
+        if let (Decision::Fresh, Some(m)) = (&decision, &recorded) {
+            match (def.restore)(results, m.result.clone()) {
+                Ok(()) => results.timings.push((stage.name().into(), m.seconds)),
+                Err(e) => decision = Decision::Run(format!("its record is unreadable ({e})")),
+            }
         }
-        let r = super::train_common::train_and_eval(
-            ctx,
-            &train_scene,
-            &train_out,
-            args.steps,
-            &args.backend,
-            &extra,
+        let Decision::Run(reason) = decision else {
+            rows.push(StageRow {
+                stage,
+                status: "up to date".into(),
+                ran: false,
+                reason: String::new(),
+                seconds: t0.elapsed().as_secs_f64(),
+            });
+            continue;
+        };
+        ctx.info(format!("[{}] {reason}", stage.name()));
+        pipeline::remove_manifest(&plan.out, stage)?;
+        // The report lists this stage's time, so record it before the report runs.
+        let value = (def.run)(plan, results, ctx)?;
+        let seconds = t0.elapsed().as_secs_f64();
+        if stage != Stage::Report {
+            results.timings.push((stage.name().into(), seconds));
+        }
+        pipeline::write_manifest(
+            &plan.out,
+            &Manifest {
+                stage,
+                fingerprint: now,
+                seconds,
+                result: value,
+            },
         )?;
-        summary.insert("train".into(), r.summary.clone());
-        result = Some(r);
+        earlier_ran = Some(stage);
+        rows.push(StageRow {
+            stage,
+            status: "ran".into(),
+            ran: true,
+            reason,
+            seconds,
+        });
     }
-    ran.push((Stage::Train, status(go)));
-    timings.push(("train".into(), t0.elapsed().as_secs_f64()));
+    Ok(rows)
+}
 
-    // export (cleaned)
-    let t0 = Instant::now();
-    let export = out.join(format!("splats_clean.{}", args.format));
-    let go = should_run(
-        Stage::Export,
-        from,
-        std::slice::from_ref(&export),
-        std::slice::from_ref(&ply),
-    );
-    if go {
-        ctx.info(format!("[export] cleaned {}", export.display()));
-        let e = super::export::run(
-            &parse::<super::export::Args>(&[
-                "export".into(),
-                "--splats".into(),
-                s(&ply),
-                "--format".into(),
-                args.format.clone(),
-                "--clean".into(),
-                "--scene".into(),
-                s(&train_scene),
-                "--out".into(),
-                s(&export),
-            ])?,
-            ctx,
-        )?;
-        summary.insert("export".into(), e);
-    }
-    ran.push((Stage::Export, status(go)));
-    timings.push(("export".into(), t0.elapsed().as_secs_f64()));
-
-    // report
-    let t0 = Instant::now();
-    let report_path = out.join("report.html");
-    let go = should_run(
-        Stage::Report,
-        from,
-        std::slice::from_ref(&report_path),
-        &[ply.clone(), export.clone()],
-    );
-    if go {
-        write_report(&report_path, &scene, &timings, result.as_ref(), &summary)?;
-        ctx.info(format!("[report] {}", report_path.display()));
-    }
-    ran.push((Stage::Report, status(go)));
-    timings.push(("report".into(), t0.elapsed().as_secs_f64()));
-
+fn print_summary(ctx: &Ctx, plan: &Plan, rows: &[StageRow], results: &Results, total: f64) {
     let table = Table {
-        caption: format!("romosplat run → {}", out.display()),
-        header: vec!["stage".into(), "status".into(), "seconds".into()],
-        rows: ran
+        caption: format!("romosplat run → {} ({total:.1} s)", plan.out.display()),
+        header: vec![
+            "stage".into(),
+            "status".into(),
+            "seconds".into(),
+            "why".into(),
+        ],
+        rows: rows
             .iter()
-            .zip(&timings)
-            .map(|((st, go), (_, secs))| {
-                vec![st.name().into(), (*go).to_string(), format!("{secs:.1}")]
+            .map(|r| {
+                vec![
+                    r.stage.name().into(),
+                    r.status.clone(),
+                    format!("{:.1}", r.seconds),
+                    r.reason.clone(),
+                ]
             })
             .collect(),
     };
     print_table(ctx, &table);
-    if let Some(r) = &result {
+    if !rows.iter().any(|r| r.ran) {
+        ctx.info("nothing to do: every stage is up to date");
+    }
+    if let Some(t) = results.train.as_ref().and_then(|t| t.test.as_ref()) {
         ctx.info(format!(
-            "held-out views: PSNR {:.2} dB, SSIM {:.4}; {} splats",
-            r.psnr, r.ssim, r.splats
+            "held-out views: PSNR {:.2} dB, SSIM {:.4} ({} views)",
+            t.mean_psnr,
+            t.mean_ssim,
+            t.views.len()
         ));
     }
-    summary.insert(
-        "stages".into(),
-        ran.iter()
-            .map(|(st, go)| (st.name().to_string(), json!(*go == "ran")))
-            .collect::<serde_json::Map<_, _>>()
-            .into(),
-    );
-    summary.insert("splats".into(), json!(ply));
-    summary.insert("export_path".into(), json!(export));
-    summary.insert("report".into(), json!(report_path));
-    Ok(summary.into())
-}
-
-fn write_report(
-    path: &Path,
-    scene: &Path,
-    timings: &[(String, f64)],
-    result: Option<&super::train_common::VariantResult>,
-    summary: &serde_json::Map<String, serde_json::Value>,
-) -> Result<()> {
-    let mut rep = Report {
-        title: format!("romosplat run — {}", scene.display()),
-        timings: timings.to_vec(),
-        ..Default::default()
-    };
-    if let Some(p) = summary.get("pose") {
-        rep.tables.push(Table {
-            caption: "COLMAP".into(),
-            header: vec![
-                "registered".into(),
-                "total".into(),
-                "points".into(),
-                "mean reprojection error (px)".into(),
-            ],
-            rows: vec![vec![
-                p["registered"].to_string(),
-                p["total"].to_string(),
-                p["points"].to_string(),
-                p["mean_reprojection_error"]
-                    .as_f64()
-                    .map_or("-".into(), |v| format!("{v:.3}")),
-            ]],
-        });
-    }
-    if let Some(r) = result {
-        rep.tables.push(Table {
-            caption: "Held-out views".into(),
-            header: vec!["PSNR".into(), "SSIM".into(), "splats".into()],
-            rows: vec![vec![
-                format!("{:.2}", r.psnr),
-                format!("{:.4}", r.ssim),
-                r.splats.to_string(),
-            ]],
-        });
-        rep.charts.push(Chart {
-            title: "training loss".into(),
-            x_label: "step".into(),
-            y_label: "loss".into(),
-            series: vec![Series {
-                name: "loss".into(),
-                points: r.loss_curve.clone(),
-            }],
-        });
-        rep.charts.push(Chart {
-            title: "training PSNR".into(),
-            x_label: "step".into(),
-            y_label: "dB".into(),
-            series: vec![Series {
-                name: "PSNR".into(),
-                points: r.psnr_curve.clone(),
-            }],
-        });
-        for p in r.renders.iter().take(4) {
-            let img = image::open(p)
-                .with_context(|| format!("{}: cannot read", p.display()))?
-                .to_rgb8();
-            rep.renders.push(vec![Figure {
-                caption: s(p),
-                png: report::png_rgb8(&report::thumbnail(&img, 320))?,
-            }]);
-        }
-    }
-    let names = loader::scene::list_images(&scene.join("images"))?;
-    let step = (names.len() / 8).max(1);
-    for n in names.iter().step_by(step).take(8) {
-        let img = image::open(scene.join("images").join(n))
-            .with_context(|| format!("{n}: cannot read"))?
-            .to_rgb8();
-        let over = match image::open(scene.join("masks").join(format!("{n}.png"))) {
-            Ok(m) => report::overlay_mask(&img, &m.to_luma8()),
-            Err(_) => img,
-        };
-        rep.contact_sheet.push(Figure {
-            caption: n.clone(),
-            png: report::png_rgb8(&report::thumbnail(&over, 320))?,
-        });
-    }
-    rep.write(path)
 }

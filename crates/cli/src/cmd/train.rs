@@ -10,9 +10,9 @@ use loader::{Scene, SceneOptions};
 use splat::backend::TrainBackend;
 use splat::io::{read_checkpoint, write_ply};
 use splat::reference::CpuBackend;
-use splat::train::data::{initial_splats, load_views, scene_extent};
-use splat::train::eval::evaluate;
-use splat::train::{InitMode, TrainData, TrainOptions, Trainer, fresh_start};
+use splat::train::data::{InitReport, initial_splats, load_views, scene_extent};
+use splat::train::eval::{EvalReport, evaluate};
+use splat::train::{InitMode, TrainData, TrainOptions, TrainReport, Trainer, fresh_start};
 use splat::types::RenderOptions;
 use std::path::{Path, PathBuf};
 
@@ -235,59 +235,142 @@ pub fn split_views(scene: &Scene, holdout_every: usize) -> (Vec<usize>, Vec<usiz
     }
 }
 
+/// A training run, typed: what [`train`] needs.
+#[derive(Debug, Clone)]
+pub struct TrainJob {
+    /// Scene folder (images/, masks/, sparse/0 or transforms.json, split.json).
+    pub scene: PathBuf,
+    /// COLMAP model folder whose poses replace the scene's.
+    pub poses: Option<PathBuf>,
+    /// Integer image downscale factor.
+    pub downscale: u32,
+    /// Hold out every Nth frame when the scene has no split.json (0 = none).
+    pub holdout_every: usize,
+    pub backend: BackendKind,
+    /// Sparse Adam (wgpu only).
+    pub sparse_adam: bool,
+    /// Resume from this checkpoint.bin.
+    pub resume: Option<PathBuf>,
+    /// Output folder (splats.ply, checkpoint.bin, summary.json).
+    pub out: PathBuf,
+    /// Write the held-out renders here as `<stem>.png`.
+    pub test_renders: Option<PathBuf>,
+    pub opts: TrainOptions,
+}
+
+/// One sample of the training curves.
+#[derive(Debug, Clone, Copy, serde::Serialize, serde::Deserialize)]
+pub struct HistoryPoint {
+    pub step: u32,
+    pub loss: f32,
+    pub psnr: f32,
+    pub splats: usize,
+}
+
+/// What [`train`] did (also written as `summary.json`).
+#[derive(Debug, Clone, serde::Serialize, serde::Deserialize)]
+pub struct TrainOutcome {
+    pub splats_ply: PathBuf,
+    pub checkpoint: PathBuf,
+    pub backend: String,
+    pub train_views: usize,
+    pub masked_views: usize,
+    pub extent: f32,
+    pub init: Option<InitReport>,
+    pub report: TrainReport,
+    /// Held-out scores (none when nothing is held out).
+    pub test: Option<EvalReport>,
+    /// Held-out renders (PNG), in the order of `test.views`.
+    #[serde(default)]
+    pub test_renders: Vec<PathBuf>,
+    /// About 100 samples of the loss / PSNR curves.
+    pub history: Vec<HistoryPoint>,
+    pub options: TrainOptions,
+}
+
+impl Args {
+    /// The training options these flags select.
+    pub fn train_options(&self) -> TrainOptions {
+        TrainOptions {
+            steps: self.steps,
+            ssim_weight: self.ssim_weight,
+            sh_degree: self.sh_degree,
+            random_background: self.random_background,
+            antialiased: self.antialiased,
+            use_masks: !self.no_masks,
+            checkpoint_every: self.checkpoint_every,
+            time_limit_s: self.max_minutes * 60.0,
+            seed: self.seed,
+            init: match self.init {
+                InitKind::Auto => InitMode::Auto,
+                InitKind::Points => InitMode::Points,
+                InitKind::Random => InitMode::Random,
+            },
+            sh_degree_every: self.sh_degree_every,
+            strategy: splat::strategy::DefaultStrategyOptions {
+                max_splats: self.max_splats,
+                densify_from: self.densify_from,
+                densify_until: self.densify_until,
+                densify_every: self.densify_every,
+                grad_threshold: self.grad_threshold,
+                opacity_reset_every: self.opacity_reset_every,
+                prune_screen_px: self.prune_screen_px,
+                ..Default::default()
+            },
+            strategy_kind: match self.strategy {
+                StrategyArg::Default => splat::strategy::StrategyKind::Default,
+                StrategyArg::Mcmc => splat::strategy::StrategyKind::Mcmc,
+            },
+            mcmc: {
+                let d = splat::strategy::McmcStrategyOptions::default();
+                splat::strategy::McmcStrategyOptions {
+                    cap_max: d.cap_max.min(self.max_splats),
+                    ..d
+                }
+            },
+            ..Default::default()
+        }
+    }
+
+    /// The typed job these flags describe.
+    pub fn job(&self) -> TrainJob {
+        TrainJob {
+            scene: self.scene.clone(),
+            poses: self.poses.clone(),
+            downscale: self.downscale,
+            holdout_every: self.holdout_every,
+            backend: self.backend,
+            sparse_adam: self.sparse_adam,
+            resume: self.resume.clone(),
+            out: self.out.clone(),
+            test_renders: None,
+            opts: self.train_options(),
+        }
+    }
+}
+
+/// `romosplat train`: run the job, write `summary.json`, return it.
 pub fn run(args: &Args, ctx: &Ctx) -> anyhow::Result<serde_json::Value> {
+    Ok(serde_json::to_value(train(&args.job(), ctx)?)?)
+}
+
+/// Train a scene: load, initialise, train, write `splats.ply` and
+/// `summary.json`, score (and optionally render) the held-out views.
+pub fn train(job: &TrainJob, ctx: &Ctx) -> anyhow::Result<TrainOutcome> {
     let mut scene = Scene::load(
-        &args.scene,
+        &job.scene,
         &SceneOptions {
-            downscale: args.downscale,
+            downscale: job.downscale,
         },
     )?;
-    if let Some(p) = &args.poses {
+    if let Some(p) = &job.poses {
         apply_poses(&mut scene, p)?;
     }
-    let opts = TrainOptions {
-        steps: args.steps,
-        ssim_weight: args.ssim_weight,
-        sh_degree: args.sh_degree,
-        random_background: args.random_background,
-        antialiased: args.antialiased,
-        use_masks: !args.no_masks,
-        checkpoint_every: args.checkpoint_every,
-        time_limit_s: args.max_minutes * 60.0,
-        seed: args.seed,
-        init: match args.init {
-            InitKind::Auto => InitMode::Auto,
-            InitKind::Points => InitMode::Points,
-            InitKind::Random => InitMode::Random,
-        },
-        sh_degree_every: args.sh_degree_every,
-        strategy: splat::strategy::DefaultStrategyOptions {
-            max_splats: args.max_splats,
-            densify_from: args.densify_from,
-            densify_until: args.densify_until,
-            densify_every: args.densify_every,
-            grad_threshold: args.grad_threshold,
-            opacity_reset_every: args.opacity_reset_every,
-            prune_screen_px: args.prune_screen_px,
-            ..Default::default()
-        },
-        strategy_kind: match args.strategy {
-            StrategyArg::Default => splat::strategy::StrategyKind::Default,
-            StrategyArg::Mcmc => splat::strategy::StrategyKind::Mcmc,
-        },
-        mcmc: {
-            let d = splat::strategy::McmcStrategyOptions::default();
-            splat::strategy::McmcStrategyOptions {
-                cap_max: d.cap_max.min(args.max_splats),
-                ..d
-            }
-        },
-        ..Default::default()
-    };
+    let opts = job.opts.clone();
     opts.validate()?;
-    let (train_idx, test_idx) = split_views(&scene, args.holdout_every);
+    let (train_idx, test_idx) = split_views(&scene, job.holdout_every);
     if train_idx.is_empty() {
-        bail!("{}: no posed training frames", args.scene.display());
+        bail!("{}: no posed training frames", job.scene.display());
     }
     ctx.info(format!(
         "loading {} training and {} test views",
@@ -299,7 +382,7 @@ pub fn run(args: &Args, ctx: &Ctx) -> anyhow::Result<serde_json::Value> {
     let cams: Vec<_> = views.iter().map(|v| v.camera).collect();
     let extent = scene_extent(&cams);
     let data = TrainData { views, extent };
-    let (start, init) = match &args.resume {
+    let (start, init) = match &job.resume {
         Some(p) => (read_checkpoint(p)?, None),
         None => {
             let (s, rep) = initial_splats(&scene, &cams, extent, &opts)?;
@@ -312,10 +395,11 @@ pub fn run(args: &Args, ctx: &Ctx) -> anyhow::Result<serde_json::Value> {
     };
     // Outputs (checkpoints, splats.ply, summary.json) are staged and moved
     // into --out together at the end: a failed run leaves --out untouched.
-    let stage = loader::io::Staging::new(&args.out)?;
-    let mut backend = make_train_backend(args.backend, args.sparse_adam, ctx)?;
+    let stage = loader::io::Staging::new(&job.out)?;
+    let mut backend = make_train_backend(job.backend, job.sparse_adam, ctx)?;
     let pb = ctx.progress(opts.steps as u64, "train");
     pb.set_position(start.step as u64);
+    pb.reset_rate();
     let mut trainer = Trainer {
         backend: backend.as_mut(),
         data: &data,
@@ -323,21 +407,26 @@ pub fn run(args: &Args, ctx: &Ctx) -> anyhow::Result<serde_json::Value> {
         checkpoint_dir: Some(stage.path().to_path_buf()),
     };
     let every = (opts.steps / 100).max(1);
-    let mut history: Vec<serde_json::Value> = Vec::new();
+    let mut history: Vec<HistoryPoint> = Vec::new();
     let (end, rep) = trainer.run(start, &mut |p| {
         if p.step.is_multiple_of(every) || p.step == p.steps {
-            history.push(serde_json::json!({"step": p.step, "loss": p.loss, "psnr": p.psnr, "splats": p.splats}));
+            history.push(HistoryPoint {
+                step: p.step,
+                loss: p.loss,
+                psnr: p.psnr,
+                splats: p.splats,
+            });
         }
         pb.set_position(p.step as u64);
         if p.step.is_multiple_of(10) || p.step == p.steps {
             pb.set_message(format!(
-                "loss {:.4} psnr {:.2} splats {} {:.2} it/s",
-                p.loss, p.psnr, p.splats, p.steps_per_sec
+                "loss {:.4} psnr {:.2} splats {}",
+                p.loss, p.psnr, p.splats
             ));
         }
     })?;
     pb.finish_and_clear();
-    let ply = args.out.join("splats.ply");
+    let ply = job.out.join("splats.ply");
     write_ply(stage.path().join("splats.ply"), &end.splats)?;
     ctx.info(format!(
         "trained {} steps in {:.1} s ({:.2} steps/s), {} splats, train PSNR {:.2} → {}",
@@ -348,7 +437,8 @@ pub fn run(args: &Args, ctx: &Ctx) -> anyhow::Result<serde_json::Value> {
         rep.final_train_psnr,
         ply.display()
     ));
-    let mut test = serde_json::Value::Null;
+    let mut test = None;
+    let mut test_renders = Vec::new();
     if !test_idx.is_empty() {
         let tviews = load_views(&scene, &test_idx, false)?;
         let ropts = RenderOptions {
@@ -357,32 +447,43 @@ pub fn run(args: &Args, ctx: &Ctx) -> anyhow::Result<serde_json::Value> {
             low_pass: opts.low_pass,
             antialiased: opts.antialiased,
         };
-        let (ev, _) = evaluate(backend.as_mut(), &end.splats, &tviews, &ropts)?;
+        let (ev, images) = evaluate(backend.as_mut(), &end.splats, &tviews, &ropts)?;
         ctx.info(format!(
             "test views: PSNR {:.2} dB, SSIM {:.4} ({} views)",
             ev.mean_psnr,
             ev.mean_ssim,
             ev.views.len()
         ));
-        test = serde_json::to_value(&ev)?;
+        if let Some(dir) = &job.test_renders {
+            std::fs::create_dir_all(dir).with_context(|| format!("creating {}", dir.display()))?;
+            for (v, img) in tviews.iter().zip(images) {
+                let path = dir.join(format!("{}.png", super::render::stem(&v.name)));
+                let img = image::Rgb32FImage::from_raw(v.camera.width, v.camera.height, img)
+                    .ok_or_else(|| anyhow::anyhow!("{}: render size mismatch", v.name))?;
+                loader::io::write_png_rgb32f(&path, &img)?;
+                test_renders.push(path);
+            }
+        }
+        test = Some(ev);
     }
-    let summary = serde_json::json!({
-        "splats_ply": ply,
-        "checkpoint": args.out.join("checkpoint.bin"),
-        "backend": rep.backend,
-        "train_views": train_idx.len(),
-        "masked_views": masked,
-        "extent": extent,
-        "init": init,
-        "report": rep,
-        "test": test,
-        "history": history,
-        "options": opts,
-    });
+    let outcome = TrainOutcome {
+        splats_ply: ply,
+        checkpoint: job.out.join("checkpoint.bin"),
+        backend: rep.backend.clone(),
+        train_views: train_idx.len(),
+        masked_views: masked,
+        extent,
+        init,
+        report: rep,
+        test,
+        test_renders,
+        history,
+        options: opts,
+    };
     loader::io::write_bytes_atomic(
         stage.path().join("summary.json"),
-        serde_json::to_string_pretty(&summary)?.as_bytes(),
+        serde_json::to_string_pretty(&outcome)?.as_bytes(),
     )?;
     stage.commit()?;
-    Ok(summary)
+    Ok(outcome)
 }

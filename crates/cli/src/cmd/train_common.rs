@@ -1,113 +1,121 @@
-//! Training one scene folder and scoring its held-out views, for the `demo`
-//! and `run` pipelines: drives `romosplat train` and `romosplat render` with
-//! their own argument parsers (so every default is the command's default),
-//! and collects what the report needs.
+//! Training for the `demo` and `run` pipelines: the short-run schedule they
+//! share, and one call that trains a scene folder, scores and renders its
+//! held-out views and hands back what the report needs, all typed.
 
+use super::train::{TrainJob, TrainOutcome};
 use crate::Ctx;
-use anyhow::{Context, Result};
-use clap::Parser;
-use std::path::{Path, PathBuf};
+use anyhow::Result;
+use splat::train::TrainOptions;
+use std::path::PathBuf;
 
 /// What a pipeline needs back from one training run.
-#[derive(Debug, Clone, Default)]
+#[derive(Debug, Clone)]
 pub struct VariantResult {
+    /// Mean held-out PSNR / SSIM (NaN when nothing is held out).
     pub psnr: f64,
     pub ssim: f64,
     pub splats: usize,
+    /// Wall time of the whole call (load, train, score, render).
     pub seconds: f64,
     /// (step, loss) samples.
     pub loss_curve: Vec<(f64, f64)>,
     /// (step, training PSNR) samples.
     pub psnr_curve: Vec<(f64, f64)>,
-    /// Rendered held-out views (PNG paths), in split order.
+    /// Rendered held-out views (PNG paths), in evaluation order.
     pub renders: Vec<PathBuf>,
-    /// The train command's JSON summary.
-    pub summary: serde_json::Value,
 }
 
-#[derive(Debug, Parser)]
-struct TrainCli {
-    #[command(flatten)]
-    args: super::train::Args,
+impl VariantResult {
+    /// The report's view of a training outcome that took `seconds`.
+    pub fn new(outcome: TrainOutcome, seconds: f64) -> Self {
+        let (psnr, ssim) = outcome
+            .test
+            .as_ref()
+            .map_or((f64::NAN, f64::NAN), |t| (t.mean_psnr, t.mean_ssim));
+        VariantResult {
+            psnr,
+            ssim,
+            splats: outcome.report.splats,
+            seconds,
+            loss_curve: outcome
+                .history
+                .iter()
+                .map(|h| (h.step as f64, h.loss as f64))
+                .collect(),
+            psnr_curve: outcome
+                .history
+                .iter()
+                .map(|h| (h.step as f64, h.psnr as f64))
+                .collect(),
+            renders: outcome.test_renders,
+        }
+    }
 }
 
-#[derive(Debug, Parser)]
-struct RenderCli {
-    #[command(flatten)]
-    args: super::render::Args,
+/// Training options for a short run: INRIA's schedule (SH degree +1 every
+/// 1000 of 30k steps, densify from 500 every 100 until 15k, opacity reset
+/// every 3000) compressed to `steps`, so a 300- or 2000-step run densifies
+/// and reaches SH degree 3 too; splats capped at 20k (≤ 500 steps) or 60k so
+/// a run stays within a CPU time budget. Everything else is the default.
+pub fn short_schedule(steps: u32, use_masks: bool) -> TrainOptions {
+    let s = steps.max(1);
+    // Densify 4–8 times: each round needs view-space gradients accumulated
+    // over many views, and more rounds multiply the splat count (and step
+    // time) without a matching gain in a short run.
+    let every = (s / 8).clamp(1, 250);
+    let cap = if s <= 500 { 20_000 } else { 60_000 };
+    let d = TrainOptions::default();
+    TrainOptions {
+        steps: s,
+        use_masks,
+        sh_degree_every: (s / 8).max(1),
+        strategy: splat::strategy::DefaultStrategyOptions {
+            max_splats: cap,
+            densify_from: every,
+            densify_every: every,
+            densify_until: s * 3 / 4,
+            opacity_reset_every: 0,
+            ..d.strategy
+        },
+        mcmc: splat::strategy::McmcStrategyOptions {
+            cap_max: d.mcmc.cap_max.min(cap),
+            ..d.mcmc
+        },
+        ..d
+    }
 }
 
-fn curve(summary: &serde_json::Value, key: &str) -> Vec<(f64, f64)> {
-    summary["history"]
-        .as_array()
-        .map(|h| {
-            h.iter()
-                .filter_map(|e| Some((e["step"].as_f64()?, e[key].as_f64()?)))
-                .collect()
-        })
-        .unwrap_or_default()
-}
-
-/// Train `scene` (its split's `clutter` views; masks when present) for
-/// `steps`, then render and score its `extra` views. `extra_args` are passed
-/// to `romosplat train` as given (e.g. `["--no-masks"]`).
-pub fn train_and_eval(
-    ctx: &Ctx,
-    scene: &Path,
-    out: &Path,
-    steps: usize,
-    backend: &str,
-    extra_args: &[String],
-) -> Result<VariantResult> {
+/// Train `job` (its held-out renders go to `job.out/renders` unless the job
+/// says where) and collect what the report needs.
+pub fn train_and_eval(ctx: &Ctx, job: &TrainJob) -> Result<VariantResult> {
     let t0 = std::time::Instant::now();
-    let mut argv: Vec<String> = vec![
-        "train".into(),
-        "--scene".into(),
-        scene.display().to_string(),
-        "--out".into(),
-        out.display().to_string(),
-        "--steps".into(),
-        steps.to_string(),
-        "--backend".into(),
-        backend.into(),
-    ];
-    argv.extend(extra_args.iter().cloned());
-    let cli = TrainCli::try_parse_from(&argv).context("train options")?;
-    let summary = super::train::run(&cli.args, ctx)?;
-    let ply = out.join("splats.ply");
-    let render_dir = out.join("renders");
-    let rargv = [
-        "render".to_string(),
-        "--splats".into(),
-        ply.display().to_string(),
-        "--scene".into(),
-        scene.display().to_string(),
-        "--split".into(),
-        "extra".into(),
-        "--out".into(),
-        render_dir.display().to_string(),
-        // Render at the training resolution.
-        "--downscale".into(),
-        cli.args.downscale.to_string(),
-    ];
-    let rcli = RenderCli::try_parse_from(&rargv).context("render options")?;
-    let rendered = super::render::run(&rcli.args, ctx)?;
-    let renders = rendered["images"]
-        .as_array()
-        .map(|a| {
-            a.iter()
-                .filter_map(|p| p.as_str().map(PathBuf::from))
-                .collect()
-        })
-        .unwrap_or_default();
-    Ok(VariantResult {
-        psnr: summary["test"]["mean_psnr"].as_f64().unwrap_or(f64::NAN),
-        ssim: summary["test"]["mean_ssim"].as_f64().unwrap_or(f64::NAN),
-        splats: summary["report"]["splats"].as_u64().unwrap_or(0) as usize,
-        seconds: t0.elapsed().as_secs_f64(),
-        loss_curve: curve(&summary, "loss"),
-        psnr_curve: curve(&summary, "psnr"),
-        renders,
-        summary,
-    })
+    let mut job = job.clone();
+    if job.test_renders.is_none() {
+        job.test_renders = Some(job.out.join("renders"));
+    }
+    let outcome = super::train::train(&job, ctx)?;
+    Ok(VariantResult::new(outcome, t0.elapsed().as_secs_f64()))
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn short_schedule_compresses_inria() {
+        let o = short_schedule(800, true);
+        assert_eq!(o.steps, 800);
+        assert_eq!(o.strategy.densify_from, 100);
+        assert_eq!(o.strategy.densify_every, 100);
+        assert_eq!(o.strategy.densify_until, 600);
+        assert_eq!(o.sh_degree_every, 100);
+        assert_eq!(o.strategy.opacity_reset_every, 0);
+        assert_eq!(o.strategy.max_splats, 60_000);
+        assert!(o.validate().is_ok());
+        let q = short_schedule(200, false);
+        assert_eq!(q.strategy.max_splats, 20_000);
+        assert!(!q.use_masks);
+        // Long runs densify at most every 250 steps.
+        assert_eq!(short_schedule(30_000, true).strategy.densify_every, 250);
+    }
 }

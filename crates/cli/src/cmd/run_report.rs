@@ -1,0 +1,131 @@
+//! `OUT/report.html` of `romosplat run`: the settings it ran with, stage
+//! times, COLMAP's result, held-out scores, training curves, frames with
+//! their masks and held-out renders.
+
+use super::run::{Plan, Results, Source};
+use super::train_common::VariantResult;
+use crate::report::{self, Chart, Figure, Report, Series, Table};
+use anyhow::{Context, Result};
+
+/// `report.html`: settings, stage times, COLMAP, held-out scores, curves,
+/// frames with their masks, held-out renders.
+pub fn write_report(plan: &Plan, r: &Results) -> Result<()> {
+    let source = match &plan.source {
+        Source::Video(p) | Source::Scene(p) => p.display().to_string(),
+    };
+    let mut rep = Report {
+        title: format!("romosplat run — {source}"),
+        timings: r.timings.clone(),
+        ..Default::default()
+    };
+    let (w, h) = train_resolution(plan).unwrap_or((0, 0));
+    rep.tables.push(Table {
+        caption: "Settings".into(),
+        header: vec![
+            "frames".into(),
+            "masks".into(),
+            "poses".into(),
+            "training".into(),
+        ],
+        rows: vec![vec![
+            r.frames
+                .as_ref()
+                .map_or("-".into(), |f| f.frames.to_string()),
+            if plan.no_masks {
+                "off (--no-masks)".into()
+            } else {
+                format!("RoMo, {} rounds", plan.romo.iterations)
+            },
+            if plan.keep_poses {
+                "the scene's own".into()
+            } else {
+                format!(
+                    "COLMAP {:?}, {}",
+                    plan.colmap.matcher,
+                    plan.colmap.camera_model.name()
+                )
+            },
+            format!("{w}×{h}, {} steps", plan.train.steps),
+        ]],
+    });
+    if let Some(p) = &r.pose {
+        rep.tables.push(Table {
+            caption: "COLMAP".into(),
+            header: vec![
+                "registered".into(),
+                "total".into(),
+                "points".into(),
+                "mean reprojection error (px)".into(),
+            ],
+            rows: vec![vec![
+                p.registered.to_string(),
+                p.total.to_string(),
+                p.points.to_string(),
+                format!("{:.3}", p.mean_reprojection_error),
+            ]],
+        });
+    }
+    if let Some(t) = &r.train {
+        let v = VariantResult::new(t.clone(), 0.0);
+        rep.tables.push(Table {
+            caption: format!(
+                "Held-out views ({})",
+                t.test.as_ref().map_or(0, |e| e.views.len())
+            ),
+            header: vec!["PSNR".into(), "SSIM".into(), "splats".into()],
+            rows: vec![vec![
+                format!("{:.2}", v.psnr),
+                format!("{:.4}", v.ssim),
+                v.splats.to_string(),
+            ]],
+        });
+        for (title, y, points) in [
+            ("training loss", "loss", v.loss_curve.clone()),
+            ("training PSNR", "dB", v.psnr_curve.clone()),
+        ] {
+            rep.charts.push(Chart {
+                title: title.into(),
+                x_label: "step".into(),
+                y_label: y.into(),
+                series: vec![Series {
+                    name: title.into(),
+                    points,
+                }],
+            });
+        }
+        for p in v.renders.iter().take(4) {
+            let img = image::open(p)
+                .with_context(|| format!("{}: cannot read", p.display()))?
+                .to_rgb8();
+            rep.renders.push(vec![Figure {
+                caption: p.display().to_string(),
+                png: report::png_rgb8(&report::thumbnail(&img, 320))?,
+            }]);
+        }
+    }
+    let images = plan.images();
+    let names = loader::scene::list_images(&images)?;
+    let step = (names.len() / 8).max(1);
+    for n in names.iter().step_by(step).take(8) {
+        let img = image::open(images.join(n))
+            .with_context(|| format!("{n}: cannot read"))?
+            .to_rgb8();
+        let over = match image::open(plan.masks().join(format!("{n}.png"))) {
+            Ok(m) if !plan.no_masks => report::overlay_mask(&img, &m.to_luma8()),
+            _ => img,
+        };
+        rep.contact_sheet.push(Figure {
+            caption: n.clone(),
+            png: report::png_rgb8(&report::thumbnail(&over, 320))?,
+        });
+    }
+    rep.write(&plan.report_path())
+}
+
+/// The training image size: the first frame's, downscaled.
+fn train_resolution(plan: &Plan) -> Option<(u32, u32)> {
+    let dir = plan.train_scene().join("images");
+    let first = loader::scene::list_images(&dir).ok()?.into_iter().next()?;
+    let (w, h) = image::image_dimensions(dir.join(first)).ok()?;
+    Some((w / plan.downscale, h / plan.downscale))
+}
