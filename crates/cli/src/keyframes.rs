@@ -25,7 +25,7 @@ use romo::plane::{Plane, Rgb};
 use std::path::Path;
 
 /// Settings of [`select_keyframes`].
-#[derive(Debug, Clone, Copy, PartialEq)]
+#[derive(Debug, Clone, Copy, PartialEq, serde::Serialize)]
 pub struct KeyframeOptions {
     /// Longer side of the analysis images, pixels. Default 320.
     pub long_side: u32,

@@ -29,6 +29,8 @@ pub enum Stage {
     Frames,
     /// RoMo motion masks.
     Mask,
+    /// Video keyframes: blurry frames and near-duplicates dropped.
+    Keyframes,
     /// Masked COLMAP.
     Pose,
     /// Masked splat training.
@@ -45,6 +47,7 @@ impl Stage {
         match self {
             Stage::Frames => "frames",
             Stage::Mask => "mask",
+            Stage::Keyframes => "keyframes",
             Stage::Pose => "pose",
             Stage::Train => "train",
             Stage::Export => "export",

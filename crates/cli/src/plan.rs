@@ -23,7 +23,8 @@
 //! `--pose-max-image-size` are kept as given (the plan may then exceed the
 //! budget, and says so).
 
-use serde::Serialize;
+use serde::{Deserialize, Serialize};
+use std::path::{Path, PathBuf};
 
 /// Share of the budget COLMAP may take.
 pub const POSE_SHARE: f64 = 0.30;
@@ -74,6 +75,101 @@ impl Rates {
     }
 }
 
+/// A video's first stream, from ffprobe.
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct VideoInfo {
+    pub width: u32,
+    pub height: u32,
+    pub frames: usize,
+    /// Average frame rate, when the container says.
+    pub fps: Option<f64>,
+}
+
+impl VideoInfo {
+    /// Frames extracted at `fps` (`None`: every frame).
+    pub fn frames_at(&self, fps: Option<f64>) -> usize {
+        match (fps, self.fps) {
+            (Some(want), Some(have)) if want > 0.0 && have > 0.0 && want < have => {
+                ((self.frames as f64 * want / have).ceil() as usize).max(1)
+            }
+            _ => self.frames,
+        }
+    }
+}
+
+/// ffprobe beside `ffmpeg` (same folder, or PATH when `ffmpeg` is a bare name).
+pub fn ffprobe_for(ffmpeg: &Path) -> PathBuf {
+    match ffmpeg.parent().filter(|p| !p.as_os_str().is_empty()) {
+        Some(dir) => dir.join("ffprobe"),
+        None => PathBuf::from("ffprobe"),
+    }
+}
+
+/// Size, frame count (packets counted, so containers without a frame count
+/// work too) and frame rate of `video`'s first stream.
+pub fn probe_video(ffmpeg: &Path, video: &Path) -> anyhow::Result<VideoInfo> {
+    let ffprobe = ffprobe_for(ffmpeg);
+    let out = std::process::Command::new(&ffprobe)
+        .args([
+            "-v",
+            "error",
+            "-select_streams",
+            "v:0",
+            "-count_packets",
+            "-show_entries",
+            "stream=width,height,avg_frame_rate,nb_read_packets",
+            "-of",
+            "default=noprint_wrappers=1",
+        ])
+        .arg(video)
+        .output()
+        .map_err(|e| {
+            anyhow::anyhow!(
+                "{}: cannot run ({e}); apt-get install -y ffmpeg",
+                ffprobe.display()
+            )
+        })?;
+    let text = String::from_utf8_lossy(&out.stdout);
+    let field = |k: &str| {
+        text.lines()
+            .find_map(|l| l.strip_prefix(k)?.strip_prefix('='))
+            .map(str::trim)
+    };
+    let num = |k: &str| field(k).and_then(|v| v.parse::<u64>().ok());
+    let fps = field("avg_frame_rate").and_then(|r| {
+        let (n, d) = r.split_once('/')?;
+        let (n, d) = (n.parse::<f64>().ok()?, d.parse::<f64>().ok()?);
+        (n > 0.0 && d > 0.0).then(|| n / d)
+    });
+    match (num("width"), num("height"), num("nb_read_packets")) {
+        (Some(w), Some(h), Some(n)) if out.status.success() && w > 0 && h > 0 && n > 0 => {
+            Ok(VideoInfo {
+                width: w as u32,
+                height: h as u32,
+                frames: n as usize,
+                fps,
+            })
+        }
+        _ => anyhow::bail!(
+            "{}: ffprobe found no video stream ({})",
+            video.display(),
+            String::from_utf8_lossy(&out.stderr).trim()
+        ),
+    }
+}
+
+/// Frame count and size (of the first image) of a scene folder's `images/`.
+pub fn probe_scene(scene: &Path) -> anyhow::Result<(usize, u32, u32)> {
+    let images = scene.join("images");
+    let names = loader::scene::list_images(&images)?;
+    let first = names
+        .first()
+        .ok_or_else(|| anyhow::anyhow!("{}: no images", images.display()))?;
+    let (w, h) = image::image_dimensions(images.join(first))
+        .map_err(|e| anyhow::anyhow!("{}: cannot read ({e})", images.join(first).display()))?;
+    Ok((names.len(), w, h))
+}
+
 /// What the planner plans for.
 #[derive(Debug, Clone, Copy, PartialEq, Serialize)]
 pub struct Input {
@@ -95,7 +191,7 @@ pub struct Fixed {
 }
 
 /// The plan.
-#[derive(Debug, Clone, PartialEq, Serialize)]
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
 pub struct Plan {
     pub budget_s: f64,
     pub frames: usize,
@@ -111,6 +207,14 @@ pub struct Plan {
     pub pose_s: f64,
     pub train_s: f64,
     pub finish_s: f64,
+    /// False when `--steps` and `--downscale` were both given and the
+    /// training rate was not probed (`train_s` is then 0).
+    #[serde(default = "yes")]
+    pub train_estimated: bool,
+}
+
+fn yes() -> bool {
+    true
 }
 
 impl Plan {
@@ -138,7 +242,11 @@ impl Plan {
                 self.train_height,
                 self.downscale,
                 self.steps,
-                m(self.train_s)
+                if self.train_estimated {
+                    m(self.train_s)
+                } else {
+                    "set by --steps and --downscale (not estimated)".into()
+                }
             ),
             format!(
                 "total {} of the {:.0}-minute budget{}",
@@ -278,6 +386,7 @@ pub fn plan(input: &Input, rates: &Rates, budget_s: f64, fixed: &Fixed) -> Plan 
         pose_s,
         train_s: steps as f64 * train_step(rates, tw, th),
         finish_s,
+        train_estimated: true,
     }
 }
 
@@ -376,8 +485,13 @@ pub fn probe_train_rates(
             ((f64::from(h) * s).round() as u32).max(8),
         )
     };
-    let (w0, h0) = size(160);
-    let (w1, h1) = size(480);
+    // Never probe above the frames' own size.
+    let long = w.max(h);
+    let (w0, h0) = size(long.min(160));
+    let (w1, h1) = size(long.min(480));
+    if w0 * h0 >= w1 * h1 {
+        return Ok((probe_step_seconds(backend, w1, h1, splats, 5)?, 0.0));
+    }
     let t0 = probe_step_seconds(backend, w0, h0, splats, 5)?;
     let t1 = probe_step_seconds(backend, w1, h1, splats, 5)?;
     let (p0, p1) = (f64::from(w0 * h0), f64::from(w1 * h1));

@@ -86,32 +86,6 @@ pub fn free_bytes(dir: &Path) -> Option<u64> {
     Some(avail_kb * 1024)
 }
 
-/// Width, height and frame count of a video's first stream (ffprobe, which
-/// ships with ffmpeg next to it).
-fn probe_video(ffmpeg: &Path, video: &Path) -> Option<(u64, u64, u64)> {
-    let ffprobe = match ffmpeg.parent().filter(|p| !p.as_os_str().is_empty()) {
-        Some(dir) => dir.join("ffprobe"),
-        None => PathBuf::from("ffprobe"),
-    };
-    let out = Command::new(ffprobe)
-        .args([
-            "-v",
-            "error",
-            "-select_streams",
-            "v:0",
-            "-show_entries",
-            "stream=width,height,nb_frames",
-            "-of",
-            "csv=p=0",
-        ])
-        .arg(video)
-        .output()
-        .ok()?;
-    let text = String::from_utf8_lossy(&out.stdout);
-    let mut f = text.trim().split(',').map(|s| s.trim().parse::<u64>().ok());
-    Some((f.next()??, f.next()??, f.next()??))
-}
-
 /// Bytes of every file below `dir`.
 fn dir_bytes(dir: &Path) -> u64 {
     std::fs::read_dir(dir)
@@ -130,10 +104,10 @@ fn dir_bytes(dir: &Path) -> u64 {
 /// (≤ 248 bytes each at SH degree 3) as PLY, checkpoint and export.
 pub fn planned_bytes(r: &Request) -> u64 {
     let frames = match (r.video, r.scene) {
-        (Some(v), _) => match probe_video(r.ffmpeg, v) {
-            Some((w, h, n)) => w * h * 3 / 2 * n,
+        (Some(v), _) => match crate::plan::probe_video(r.ffmpeg, v) {
+            Ok(i) => u64::from(i.width) * u64::from(i.height) * 3 / 2 * i.frames as u64,
             // Decoded frames are tens of times the size of a compressed video.
-            None => std::fs::metadata(v).map_or(0, |m| m.len() * 30),
+            Err(_) => std::fs::metadata(v).map_or(0, |m| m.len() * 30),
         },
         // A scene's frames are linked, not copied; the undistorted copy is made.
         (None, Some(s)) => dir_bytes(&s.join("images")),
@@ -232,7 +206,8 @@ pub fn for_run(args: &crate::cmd::run::Args, ctx: &crate::Ctx) -> anyhow::Result
         crate::cmd::train::BackendKind::Wgpu => "wgpu",
         crate::cmd::train::BackendKind::Cpu => "cpu",
     };
-    let max_splats = crate::cmd::train_common::short_schedule(args.steps, true)
+    let steps = args.steps.unwrap_or(crate::plan::MAX_STEPS as u32);
+    let max_splats = crate::cmd::train_common::short_schedule(steps, true)
         .strategy
         .max_splats;
     let pf = check(&Request {
@@ -241,7 +216,11 @@ pub fn for_run(args: &crate::cmd::run::Args, ctx: &crate::Ctx) -> anyhow::Result
         out: &args.out,
         fps: args.fps,
         ffmpeg: &args.ffmpeg,
-        colmap: &args.colmap,
+        colmap: args
+            .pose
+            .colmap
+            .as_deref()
+            .unwrap_or(std::path::Path::new("colmap")),
         keep_poses: args.keep_poses,
         no_masks: args.no_masks,
         mask_options: args.mask_options.as_deref(),

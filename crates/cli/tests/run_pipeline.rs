@@ -128,10 +128,32 @@ fn run_video_end_to_end_without_a_split() {
     let first = romosplat(&args);
     assert_eq!(
         ran(&first),
-        ["frames", "mask", "pose", "train", "export", "report"]
+        [
+            "frames",
+            "mask",
+            "keyframes",
+            "pose",
+            "train",
+            "export",
+            "report"
+        ]
     );
-    let n = train.len();
-    assert_eq!(first["frames"]["frames"], n);
+    assert_eq!(first["frames"]["frames"], train.len());
+    // Keyframes: the frames COLMAP and training see, with masks of the same names.
+    let n = first["keyframes"]["kept"].as_u64().unwrap() as usize;
+    assert!(n >= train.len() / 4 && n <= train.len(), "kept {n}");
+    let kept = loader::scene::list_images(&out.join("keyframes/images")).unwrap();
+    assert_eq!(kept.len(), n);
+    for k in &kept {
+        assert!(
+            out.join("keyframes/masks")
+                .join(format!("{k}.png"))
+                .is_file()
+        );
+    }
+    // The plan is printed into the report and kept for reruns.
+    assert_eq!(first["plan"]["steps"], 30);
+    assert!(out.join("plan.json").is_file());
     let registered = first["pose"]["registered"].as_u64().unwrap() as usize;
     assert!(
         registered * 10 >= n * 8,
@@ -152,7 +174,7 @@ fn run_video_end_to_end_without_a_split() {
         assert!(out.join(f).is_file(), "{f} missing");
     }
     let html = std::fs::read_to_string(out.join("report.html")).unwrap();
-    assert!(html.contains("COLMAP") && html.contains("Held-out"));
+    assert!(html.contains("COLMAP") && html.contains("Held-out") && html.contains("Plan for the"));
 
     // Touching the video and the options file without changing them reruns
     // nothing (they are hashed); the recorded results come back from the

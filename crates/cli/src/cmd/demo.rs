@@ -377,7 +377,7 @@ fn romo_masks(
     })
 }
 
-/// 3. COLMAP on every `--pose-stride`th video frame: unmasked, RoMo masks,
+/// Step 3: COLMAP on every `--pose-stride`th video frame: unmasked, RoMo masks,
 /// ground-truth masks; ATE against the generator's poses.
 fn colmap_runs(
     args: &Args,
@@ -450,7 +450,7 @@ fn colmap_runs(
     Ok(pose_rows)
 }
 
-/// 4. + 5. Train on the ground-truth poses four ways, each scored on the
+/// Steps 4 and 5: train on the ground-truth poses four ways, each scored on the
 /// clean held-out views. Returns the step count and one result per variant.
 fn train_variants(
     args: &Args,

@@ -5,8 +5,7 @@
 use super::pose::PoseOpts;
 use super::train::{BackendKind, make_backend};
 use crate::Ctx;
-use crate::plan::{Fixed, Input, Rates, plan, probe_train_rates};
-use anyhow::Context;
+use crate::plan::{Fixed, Input, Rates, plan, probe_scene, probe_train_rates, probe_video};
 use std::path::PathBuf;
 
 /// Splats in the training-rate probe (a typical mid-run count).
@@ -38,36 +37,6 @@ pub struct Args {
     pub pose: PoseOpts,
 }
 
-/// Frame count and size of a video, from ffprobe.
-fn probe_video(video: &std::path::Path) -> anyhow::Result<(usize, u32, u32)> {
-    let out = std::process::Command::new("ffprobe")
-        .args([
-            "-v",
-            "error",
-            "-select_streams",
-            "v:0",
-            "-count_packets",
-            "-show_entries",
-            "stream=width,height,nb_read_packets",
-            "-of",
-            "csv=p=0",
-        ])
-        .arg(video)
-        .output()
-        .with_context(|| "ffprobe not found: apt-get install -y ffmpeg".to_string())?;
-    let text = String::from_utf8_lossy(&out.stdout);
-    let f: Vec<&str> = text.trim().split(',').collect();
-    let parse = |i: usize| f.get(i).and_then(|s| s.trim().parse::<u64>().ok());
-    match (parse(0), parse(1), parse(2)) {
-        (Some(w), Some(h), Some(n)) if out.status.success() => Ok((n as usize, w as u32, h as u32)),
-        _ => anyhow::bail!(
-            "{}: ffprobe could not read a video stream ({})",
-            video.display(),
-            String::from_utf8_lossy(&out.stderr).trim()
-        ),
-    }
-}
-
 /// Plan for an input with the probed adapter.
 pub fn plan_for(
     input: &Input,
@@ -80,6 +49,18 @@ pub fn plan_for(
         budget_minutes > 0.0 && budget_minutes.is_finite(),
         "--budget-minutes must be > 0, got {budget_minutes}"
     );
+    // Steps and resolution both set: nothing to plan for training, so no probe
+    // (its estimate is then left out of the plan's total).
+    if fixed.steps.is_some() && fixed.downscale.is_some() {
+        let mut p = plan(
+            input,
+            &Rates::measured(0.0, 0.0),
+            budget_minutes * 60.0,
+            fixed,
+        );
+        p.train_estimated = false;
+        return Ok(p);
+    }
     let mut b = make_backend(backend, ctx)?;
     let (a, per_px) = probe_train_rates(b.as_mut(), input.width, input.height, PROBE_SPLATS)?;
     let rates = Rates::measured(a, per_px);
@@ -89,17 +70,11 @@ pub fn plan_for(
 /// Run `romosplat plan`.
 pub fn run(args: &Args, ctx: &Ctx) -> anyhow::Result<serde_json::Value> {
     let (frames, w, h) = match (&args.video, &args.scene) {
-        (Some(v), _) => probe_video(v)?,
-        (None, Some(s)) => {
-            let images = s.join("images");
-            let names = loader::scene::list_images(&images)?;
-            let first = names
-                .first()
-                .with_context(|| format!("{}: no images", images.display()))?;
-            let (w, h) = image::image_dimensions(images.join(first))
-                .with_context(|| format!("{}: cannot read", images.join(first).display()))?;
-            (names.len(), w, h)
+        (Some(v), _) => {
+            let info = probe_video(std::path::Path::new("ffmpeg"), v)?;
+            (info.frames, info.width, info.height)
         }
+        (None, Some(s)) => probe_scene(s)?,
         (None, None) => anyhow::bail!("give --video or --scene"),
     };
     let mut colmap = pose::ColmapOptions::default();

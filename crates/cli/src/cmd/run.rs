@@ -13,7 +13,9 @@ use super::export::{ExportJob, ExportOutcome, Format};
 use super::train::{BackendKind, TrainJob, TrainOutcome};
 use super::train_common::short_schedule;
 use crate::Ctx;
+use crate::keyframes::{KeyframeOptions, link_keyframes, select_keyframes};
 use crate::pipeline::{self, Decision, Input, Manifest, Stage};
+use crate::plan::Plan as Budget;
 use crate::report::Table;
 use anyhow::{Context, Result, bail};
 use serde::{Deserialize, Serialize};
@@ -49,30 +51,33 @@ pub struct Args {
     /// Full RoMo options as JSON (a partial `RomoOptions`); --iterations overrides.
     #[arg(long)]
     pub mask_options: Option<PathBuf>,
-    /// COLMAP matcher: sequential for videos, exhaustive for photo collections.
-    #[arg(long, value_enum, default_value = "sequential")]
-    pub matcher: super::pose::MatcherArg,
-    /// COLMAP camera model.
-    #[arg(long, default_value = "SIMPLE_RADIAL")]
-    pub camera_model: String,
-    /// The colmap program (name on PATH or path).
-    #[arg(long, default_value = "colmap")]
-    pub colmap: PathBuf,
+    /// COLMAP options (planned from the budget when not given; the matcher
+    /// is sequential for a video and exhaustive for a scene folder).
+    #[command(flatten)]
+    pub pose: super::pose::PoseOpts,
     /// Use the scene's own `sparse/0` (or transforms.json) poses instead of running COLMAP.
     #[arg(long)]
     pub keep_poses: bool,
     /// Do not use masks anywhere (COLMAP and training): the unmasked baseline.
     #[arg(long)]
     pub no_masks: bool,
-    /// Training steps (INRIA's schedule compressed to this many steps).
-    #[arg(long, default_value_t = 7000)]
-    pub steps: u32,
+    /// Wall-time budget for the whole run, minutes: plans the training
+    /// resolution and steps and COLMAP's image size, features and frame
+    /// stride that are not given explicitly (see `romosplat plan`).
+    #[arg(long, default_value_t = 20.0)]
+    pub budget_minutes: f64,
+    /// Training steps (INRIA's schedule compressed to this many steps) [default: planned].
+    #[arg(long)]
+    pub steps: Option<u32>,
     /// Training backend.
     #[arg(long, value_enum, default_value_t = BackendKind::Auto)]
     pub backend: BackendKind,
-    /// Integer downscale of the frames for training.
-    #[arg(long, default_value_t = 1)]
-    pub downscale: u32,
+    /// Integer downscale of the frames for training [default: planned].
+    #[arg(long)]
+    pub downscale: Option<u32>,
+    /// Video: keep every extracted frame (no keyframe selection).
+    #[arg(long)]
+    pub all_frames: bool,
     /// Hold out every Nth frame for testing when there is no split.json (0 = none).
     #[arg(long, default_value_t = 8)]
     pub holdout_every: usize,
@@ -91,11 +96,11 @@ pub enum Source {
     Scene(PathBuf),
 }
 
-/// Everything the stages need, resolved from the flags once.
+/// Everything the stages need, resolved from the flags and the budget plan once.
 #[derive(Debug, Clone)]
 pub struct Plan {
     pub out: PathBuf,
-    /// `OUT/scene`: frames (or links), masks, COLMAP model.
+    /// `OUT/scene`: frames (or links), masks.
     pub scene: PathBuf,
     pub source: Source,
     pub fps: Option<f64>,
@@ -105,6 +110,8 @@ pub struct Plan {
     pub romo: romo::RomoOptions,
     /// The `--mask-options` file (a hashed input of the mask stage).
     pub mask_options: Option<PathBuf>,
+    /// Keyframe selection (videos, unless `--all-frames`).
+    pub keyframes: Option<KeyframeOptions>,
     pub colmap: pose::ColmapOptions,
     pub train: splat::train::TrainOptions,
     pub downscale: u32,
@@ -113,37 +120,49 @@ pub struct Plan {
     pub format: Format,
     pub clean: splat::export::CleanOptions,
     pub from: Option<Stage>,
+    /// The time-budget plan the values above follow where no flag set them.
+    pub budget: Budget,
 }
 
 impl Plan {
-    /// Resolve the flags.
-    pub fn new(args: &Args) -> Result<Plan> {
+    /// Resolve the flags; `budget` supplies what they leave unset.
+    pub fn new(args: &Args, budget: &Budget) -> Result<Plan> {
         let source = match (&args.video, &args.scene) {
             (Some(v), None) => Source::Video(v.clone()),
             (None, Some(s)) => Source::Scene(s.clone()),
             _ => bail!("give exactly one of --video and --scene"),
         };
+        let video = matches!(source, Source::Video(_));
         let mut romo = match &args.mask_options {
             Some(p) => super::mask::read_options(p)?,
             None => romo::RomoOptions::default(),
         };
         romo.iterations = args.iterations;
         romo.overlays = true;
-        let camera_model = loader::CameraModel::from_name(&args.camera_model).ok_or_else(|| {
-            anyhow::anyhow!("unknown COLMAP camera model `{}`", args.camera_model)
-        })?;
-        let colmap = pose::ColmapOptions {
-            colmap: args.colmap.clone(),
-            matcher: match args.matcher {
-                super::pose::MatcherArg::Sequential => pose::Matcher::Sequential,
-                super::pose::MatcherArg::Exhaustive => pose::Matcher::Exhaustive,
+        // Videos: sequential matching and COLMAP's video mapper bounds;
+        // photo collections: every pair. The budget picks image size,
+        // features and stride; explicit pose flags override all of it.
+        let mut colmap = pose::ColmapOptions {
+            matcher: if video {
+                pose::Matcher::Sequential
+            } else {
+                pose::Matcher::Exhaustive
             },
-            camera_model,
+            mapper: if video {
+                pose::colmap_runner::MapperOptions::video()
+            } else {
+                pose::colmap_runner::MapperOptions::default()
+            },
             use_masks: !args.no_masks,
+            max_image_size: budget.pose_max_image_size,
+            max_num_features: budget.pose_features,
+            stride: budget.pose_stride,
             ..Default::default()
         };
+        args.pose.apply(&mut colmap)?;
         colmap.validate()?;
-        let train = short_schedule(args.steps, !args.no_masks);
+        let steps = args.steps.unwrap_or(budget.steps as u32);
+        let train = short_schedule(steps, !args.no_masks);
         train.validate()?;
         Ok(Plan {
             out: args.out.clone(),
@@ -155,17 +174,27 @@ impl Plan {
             no_masks: args.no_masks,
             romo,
             mask_options: args.mask_options.clone(),
+            keyframes: (video && !args.all_frames).then(KeyframeOptions::default),
             colmap,
             train,
-            downscale: args.downscale.max(1),
+            downscale: args.downscale.unwrap_or(budget.downscale).max(1),
             holdout_every: args.holdout_every,
             backend: args.backend,
             format: args.format,
             clean: splat::export::CleanOptions::default(),
             from: args.from,
+            budget: budget.clone(),
         })
     }
 
+    /// The folder COLMAP and training read: the keyframes when selected, else the scene.
+    pub fn posed_scene(&self) -> PathBuf {
+        if self.keyframes.is_some() {
+            self.out.join("keyframes")
+        } else {
+            self.scene.clone()
+        }
+    }
     pub fn images(&self) -> PathBuf {
         self.scene.join("images")
     }
@@ -173,16 +202,13 @@ impl Plan {
         self.scene.join("masks")
     }
     pub fn sparse(&self) -> PathBuf {
-        self.scene.join("sparse/0")
+        self.posed_scene().join("sparse/0")
     }
-    /// COLMAP's undistorted PINHOLE copy when it made one, else the scene.
+    /// COLMAP's undistorted PINHOLE copy when it made one, else the posed scene.
     pub fn train_scene(&self) -> PathBuf {
-        let u = self.scene.join("undistorted");
-        if u.join("images").is_dir() {
-            u
-        } else {
-            self.scene.clone()
-        }
+        let posed = self.posed_scene();
+        let u = posed.join("undistorted");
+        if u.join("images").is_dir() { u } else { posed }
     }
     pub fn train_dir(&self) -> PathBuf {
         self.out.join("train")
@@ -240,11 +266,21 @@ impl MaskOutcome {
     }
 }
 
+/// What the keyframes stage kept.
+#[derive(Debug, Clone, Serialize, Deserialize)]
+pub struct KeyframesOutcome {
+    pub kept: usize,
+    pub frames: usize,
+    pub blurry: usize,
+    pub duplicates: usize,
+}
+
 /// The typed results of the stages (run now, or restored from their manifests).
 #[derive(Debug, Default)]
 pub struct Results {
     pub frames: Option<FramesOutcome>,
     pub mask: Option<MaskOutcome>,
+    pub keyframes: Option<KeyframesOutcome>,
     pub pose: Option<pose::ColmapReport>,
     pub train: Option<TrainOutcome>,
     pub export: Option<ExportOutcome>,
@@ -268,7 +304,7 @@ pub struct StageDef {
 }
 
 /// The stages, in order.
-pub fn stages() -> [StageDef; 6] {
+pub fn stages() -> [StageDef; 7] {
     [
         StageDef {
             stage: Stage::Frames,
@@ -322,8 +358,12 @@ pub fn stages() -> [StageDef; 6] {
             },
         },
         StageDef {
-            stage: Stage::Pose,
-            skip: |p| p.keep_poses.then_some("kept the scene's poses"),
+            stage: Stage::Keyframes,
+            skip: |p| {
+                p.keyframes
+                    .is_none()
+                    .then_some("every frame (scene folder or --all-frames)")
+            },
             inputs: |p| {
                 let mut v = vec![Input::Stat(p.images())];
                 if !p.no_masks {
@@ -331,12 +371,32 @@ pub fn stages() -> [StageDef; 6] {
                 }
                 v
             },
+            outputs: |p| vec![p.posed_scene().join("images")],
+            options: |p| Ok(json!({ "keyframes": p.keyframes, "masks": !p.no_masks })),
+            run: run_keyframes,
+            restore: |r, v| {
+                r.keyframes = Some(serde_json::from_value(v)?);
+                Ok(())
+            },
+        },
+        StageDef {
+            stage: Stage::Pose,
+            skip: |p| p.keep_poses.then_some("kept the scene's poses"),
+            inputs: |p| {
+                let posed = p.posed_scene();
+                let mut v = vec![Input::Stat(posed.join("images"))];
+                if !p.no_masks {
+                    v.push(Input::Stat(posed.join("masks")));
+                }
+                v
+            },
             outputs: |p| vec![p.sparse()],
             options: |p| Ok(serde_json::to_value(&p.colmap)?),
             run: |p, r, ctx| {
-                let paths = pose::ColmapPaths::for_scene(&p.scene);
+                let posed = p.posed_scene();
+                let paths = pose::ColmapPaths::for_scene(&posed);
                 let rep = super::pose::colmap(&paths, &p.colmap, ctx)
-                    .with_context(|| format!("pose stage on {}", p.scene.display()))?;
+                    .with_context(|| format!("pose stage on {}", posed.display()))?;
                 let v = serde_json::to_value(&rep)?;
                 r.pose = Some(rep);
                 Ok(v)
@@ -494,6 +554,103 @@ fn run_frames(p: &Plan, r: &mut Results, ctx: &Ctx) -> Result<serde_json::Value>
     Ok(v)
 }
 
+/// Keyframes: link the sharp, non-duplicate frames (and their masks) into `OUT/keyframes`.
+fn run_keyframes(p: &Plan, r: &mut Results, ctx: &Ctx) -> Result<serde_json::Value> {
+    use crate::keyframes::Verdict;
+    let opts = p.keyframes.unwrap_or_default();
+    let dir = p.posed_scene();
+    // New keyframes invalidate the COLMAP database and model made from the old ones.
+    clear(&dir)?;
+    let names = loader::scene::list_images(&p.images())?;
+    let masks = (!p.no_masks).then(|| p.masks());
+    let k = select_keyframes(&p.images(), masks.as_deref(), &names, &opts)?;
+    link_keyframes(&p.scene, &k.kept, &dir)?;
+    let count = |f: fn(&Verdict) -> bool| k.verdicts.iter().filter(|(_, v)| f(v)).count();
+    let outcome = KeyframesOutcome {
+        kept: k.kept.len(),
+        frames: names.len(),
+        blurry: count(|v| matches!(v, Verdict::Blurry { .. })),
+        duplicates: count(|v| matches!(v, Verdict::Duplicate { .. })),
+    };
+    ctx.info(format!(
+        "  kept {} of {} frames ({} blurry, {} near-duplicates dropped)",
+        outcome.kept, outcome.frames, outcome.blurry, outcome.duplicates
+    ));
+    let v = serde_json::to_value(&outcome)?;
+    r.keyframes = Some(outcome);
+    Ok(v)
+}
+
+/// The time-budget plan for this run. It is kept in `OUT/plan.json` with
+/// what it was made from (budget, input size, the flags it respects), and
+/// reused while those stay the same: a rerun neither probes the adapter
+/// again nor sees a slightly different probe change its stages' options.
+fn budget(args: &Args, ctx: &Ctx) -> Result<Budget> {
+    let (frames, width, height) = match (&args.video, &args.scene) {
+        (Some(v), _) => {
+            let info = crate::plan::probe_video(&args.ffmpeg, v)?;
+            (info.frames_at(args.fps), info.width, info.height)
+        }
+        (None, Some(s)) => crate::plan::probe_scene(s)?,
+        (None, None) => bail!("give --video or --scene"),
+    };
+    let input = crate::plan::Input {
+        frames,
+        width,
+        height,
+        overlap: args
+            .pose
+            .pose_overlap
+            .unwrap_or(pose::ColmapOptions::default().overlap),
+    };
+    let fixed = crate::plan::Fixed {
+        steps: args.steps.map(|s| s as usize),
+        downscale: args.downscale,
+        pose_stride: args.pose.pose_stride,
+        pose_features: args.pose.pose_features,
+        pose_max_image_size: args.pose.pose_max_image_size,
+    };
+    let key = json!({
+        "version": pipeline::VERSION,
+        "budget_minutes": args.budget_minutes,
+        "input": input,
+        "fixed": fixed,
+        "backend": format!("{:?}", args.backend),
+    });
+    let path = args.out.join("plan.json");
+    let recorded = std::fs::read(&path)
+        .ok()
+        .and_then(|b| serde_json::from_slice::<RecordedPlan>(&b).ok())
+        .filter(|r| r.key == key);
+    let budget = match recorded {
+        Some(r) => r.plan,
+        None => {
+            let b = super::plan::plan_for(&input, args.budget_minutes, &fixed, args.backend, ctx)?;
+            let rec = RecordedPlan {
+                key,
+                plan: b.clone(),
+            };
+            loader::io::write_bytes_atomic(&path, serde_json::to_string_pretty(&rec)?.as_bytes())?;
+            b
+        }
+    };
+    ctx.info(format!(
+        "plan for {frames} frames of {width}×{height} ({:.0}-minute budget; flags given override it):",
+        args.budget_minutes
+    ));
+    for l in budget.lines() {
+        ctx.info(format!("  {l}"));
+    }
+    Ok(budget)
+}
+
+/// `OUT/plan.json`: a plan and what it was made from.
+#[derive(Debug, Serialize, Deserialize)]
+struct RecordedPlan {
+    key: serde_json::Value,
+    plan: Budget,
+}
+
 /// How one stage went in this run.
 #[derive(Debug, Clone, Serialize)]
 pub struct StageRow {
@@ -511,9 +668,10 @@ pub struct StageRow {
 pub fn run(args: &Args, ctx: &Ctx) -> Result<serde_json::Value> {
     let t_all = Instant::now();
     crate::preflight::for_run(args, ctx)?;
-    let plan = Plan::new(args)?;
-    std::fs::create_dir_all(&plan.out)
-        .with_context(|| format!("creating {}", plan.out.display()))?;
+    std::fs::create_dir_all(&args.out)
+        .with_context(|| format!("creating {}", args.out.display()))?;
+    let budget = budget(args, ctx)?;
+    let plan = Plan::new(args, &budget)?;
     let mut results = Results::default();
     let rows = run_stages(&plan, &mut results, ctx)?;
     print_summary(ctx, &plan, &rows, &results, t_all.elapsed().as_secs_f64());
@@ -537,6 +695,8 @@ pub fn run(args: &Args, ctx: &Ctx) -> Result<serde_json::Value> {
     summary.insert("seconds".into(), json!(t_all.elapsed().as_secs_f64()));
     summary.insert("frames".into(), json!(results.frames));
     summary.insert("mask".into(), json!(results.mask));
+    summary.insert("keyframes".into(), json!(results.keyframes));
+    summary.insert("plan".into(), json!(plan.budget));
     summary.insert("pose".into(), json!(results.pose));
     summary.insert("train".into(), json!(results.train));
     summary.insert("export".into(), json!(results.export));

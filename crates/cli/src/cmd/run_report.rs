@@ -28,9 +28,14 @@ pub fn write_report(plan: &Plan, r: &Results) -> Result<()> {
             "training".into(),
         ],
         rows: vec![vec![
-            r.frames
-                .as_ref()
-                .map_or("-".into(), |f| f.frames.to_string()),
+            match (&r.frames, &r.keyframes) {
+                (Some(f), Some(k)) => format!(
+                    "{} of {} kept ({} blurry, {} near-duplicates)",
+                    k.kept, f.frames, k.blurry, k.duplicates
+                ),
+                (Some(f), None) => f.frames.to_string(),
+                _ => "-".into(),
+            },
             if plan.no_masks {
                 "off (--no-masks)".into()
             } else {
@@ -47,6 +52,14 @@ pub fn write_report(plan: &Plan, r: &Results) -> Result<()> {
             },
             format!("{w}×{h}, {} steps", plan.train.steps),
         ]],
+    });
+    rep.tables.push(Table {
+        caption: format!(
+            "Plan for the {:.0}-minute budget (flags given override it)",
+            plan.budget.budget_s / 60.0
+        ),
+        header: vec!["estimate".into()],
+        rows: plan.budget.lines().into_iter().map(|l| vec![l]).collect(),
     });
     if let Some(p) = &r.pose {
         rep.tables.push(Table {
