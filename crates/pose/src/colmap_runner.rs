@@ -42,6 +42,7 @@ use std::time::Instant;
 /// How image pairs are chosen for matching.
 #[derive(Debug, Clone, Copy, PartialEq, Eq, Serialize, Deserialize, Default)]
 #[serde(rename_all = "lowercase")]
+#[cfg_attr(feature = "cli", derive(clap::ValueEnum))]
 pub enum Matcher {
     /// Each frame against the next `overlap` frames (videos). Default.
     #[default]

@@ -6,30 +6,6 @@ use crate::Ctx;
 use splat::export::{self, CleanOptions, ExportFormat, ExportOptions, SceneGeometry};
 use std::path::{Path, PathBuf};
 
-/// Output format (`--format`).
-#[derive(Debug, Clone, Copy, PartialEq, Eq, clap::ValueEnum)]
-pub enum Format {
-    /// INRIA 3DGS PLY.
-    Ply,
-    /// antimatter15 `.splat` (32 bytes per splat, no SH beyond the colour).
-    Splat,
-    /// glTF binary with KHR_gaussian_splatting.
-    Glb,
-    /// Niantic SPZ (gzip).
-    Spz,
-}
-
-impl From<Format> for ExportFormat {
-    fn from(f: Format) -> Self {
-        match f {
-            Format::Ply => ExportFormat::Ply,
-            Format::Splat => ExportFormat::Splat,
-            Format::Glb => ExportFormat::Glb,
-            Format::Spz => ExportFormat::Spz,
-        }
-    }
-}
-
 /// `romosplat export`
 #[derive(Debug, clap::Args)]
 pub struct Args {
@@ -38,7 +14,7 @@ pub struct Args {
     pub splats: PathBuf,
     /// Output format; must match the extension of --out, which alone decides it when absent.
     #[arg(long, value_enum)]
-    pub format: Option<Format>,
+    pub format: Option<ExportFormat>,
     /// Output file (written atomically).
     #[arg(long)]
     pub out: PathBuf,
@@ -150,7 +126,7 @@ impl Args {
     /// The typed job these flags describe.
     pub fn job(&self) -> anyhow::Result<ExportJob> {
         let args = self;
-        let format = output_format(&args.out, args.format.map(ExportFormat::from))?;
+        let format = output_format(&args.out, args.format)?;
         let mut options = ExportOptions::default();
         options.spz.version = args.spz_version;
         options.spz.convert_axes = !args.keep_axes;

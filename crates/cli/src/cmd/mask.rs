@@ -51,7 +51,7 @@ pub struct Args {
     /// explains ≥ --h-inlier-ratio × F's inliers), gric (Torr 1998),
     /// fundamental (always F, the paper) or homography (always H).
     #[arg(long, value_enum)]
-    pub model_selection: Option<Selection>,
+    pub model_selection: Option<romo::geometry::robust::ModelSelection>,
     /// For --model-selection inlier-ratio: H is chosen when its inliers reach
     /// this fraction of F's (default 0.9).
     #[arg(long)]
@@ -122,7 +122,7 @@ pub fn options(args: &Args) -> anyhow::Result<romo::RomoOptions> {
     opts.overlays |= args.overlays;
     opts.seed = args.seed;
     if let Some(m) = args.model_selection {
-        opts.labels.robust.selection = m.into();
+        opts.labels.robust.selection = m;
     }
     if let Some(r) = args.h_inlier_ratio {
         opts.labels.robust.h_inlier_ratio = r;
@@ -212,29 +212,4 @@ pub fn segment(
         report.dropped_frames.len()
     ));
     Ok(report)
-}
-
-/// `--model-selection` values.
-#[derive(Debug, Clone, Copy, PartialEq, Eq, clap::ValueEnum)]
-pub enum Selection {
-    /// H when its inliers reach --h-inlier-ratio × F's.
-    InlierRatio,
-    /// Torr's GRIC.
-    Gric,
-    /// Always F.
-    Fundamental,
-    /// Always H.
-    Homography,
-}
-
-impl From<Selection> for romo::geometry::robust::ModelSelection {
-    fn from(s: Selection) -> Self {
-        use romo::geometry::robust::ModelSelection as M;
-        match s {
-            Selection::InlierRatio => M::InlierRatio,
-            Selection::Gric => M::Gric,
-            Selection::Fundamental => M::Fundamental,
-            Selection::Homography => M::Homography,
-        }
-    }
 }

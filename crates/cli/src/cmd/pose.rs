@@ -9,15 +9,6 @@ use pose::colmap_runner::{
 use pose::metrics::{PoseMetricsOptions, evaluate};
 use std::path::PathBuf;
 
-/// Matcher choice on the command line.
-#[derive(Debug, Clone, Copy, PartialEq, Eq, clap::ValueEnum)]
-pub enum MatcherArg {
-    /// Videos: each frame against the next `--pose-overlap` frames.
-    Sequential,
-    /// Photo collections: every pair.
-    Exhaustive,
-}
-
 /// Mapper settings on the command line.
 #[derive(Debug, Clone, Copy, PartialEq, Eq, clap::ValueEnum)]
 pub enum MapperPreset {
@@ -34,7 +25,7 @@ pub enum MapperPreset {
 pub struct PoseOpts {
     /// COLMAP pair selection.
     #[arg(long, value_enum)]
-    pub matcher: Option<MatcherArg>,
+    pub matcher: Option<Matcher>,
     /// COLMAP camera model (SIMPLE_RADIAL, OPENCV, PINHOLE, RADIAL, ...).
     #[arg(long)]
     pub camera_model: Option<String>,
@@ -62,10 +53,7 @@ impl PoseOpts {
     /// Apply the options that were given onto `base`.
     pub fn apply(&self, base: &mut ColmapOptions) -> anyhow::Result<()> {
         if let Some(m) = self.matcher {
-            base.matcher = match m {
-                MatcherArg::Sequential => Matcher::Sequential,
-                MatcherArg::Exhaustive => Matcher::Exhaustive,
-            };
+            base.matcher = m;
         }
         if let Some(name) = &self.camera_model {
             base.camera_model = loader::CameraModel::from_name(name)

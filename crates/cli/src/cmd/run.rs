@@ -9,7 +9,7 @@
 //! holds our masks and model.
 
 use super::demo::{link, print_table};
-use super::export::{ExportJob, ExportOutcome, Format};
+use super::export::{ExportJob, ExportOutcome};
 use super::train::{BackendKind, TrainJob, TrainOutcome};
 use super::train_common::short_schedule;
 use crate::Ctx;
@@ -20,6 +20,7 @@ use crate::report::Table;
 use anyhow::{Context, Result, bail};
 use serde::{Deserialize, Serialize};
 use serde_json::json;
+use splat::export::ExportFormat;
 use std::path::{Path, PathBuf};
 use std::time::Instant;
 
@@ -82,8 +83,8 @@ pub struct Args {
     #[arg(long, default_value_t = 8)]
     pub holdout_every: usize,
     /// Export format of the cleaned splats.
-    #[arg(long, value_enum, default_value_t = Format::Ply)]
-    pub format: Format,
+    #[arg(long, value_enum, default_value_t = ExportFormat::Ply)]
+    pub format: ExportFormat,
 }
 
 /// Where the frames come from.
@@ -117,7 +118,7 @@ pub struct Plan {
     pub downscale: u32,
     pub holdout_every: usize,
     pub backend: BackendKind,
-    pub format: Format,
+    pub format: ExportFormat,
     pub clean: splat::export::CleanOptions,
     pub from: Option<Stage>,
     /// The time-budget plan the values above follow where no flag set them.
@@ -217,7 +218,7 @@ impl Plan {
         self.train_dir().join("splats.ply")
     }
     pub fn export_path(&self) -> PathBuf {
-        let ext = splat::export::ExportFormat::from(self.format).name();
+        let ext = self.format.name();
         self.out.join(format!("splats_clean.{ext}"))
     }
     pub fn report_path(&self) -> PathBuf {
@@ -464,7 +465,7 @@ pub fn stages() -> [StageDef; 7] {
             run: |p, r, ctx| {
                 let job = ExportJob {
                     splats: p.splats(),
-                    format: p.format.into(),
+                    format: p.format,
                     out: p.export_path(),
                     clean: Some(p.clean.clone()),
                     scene: Some(p.train_scene()),

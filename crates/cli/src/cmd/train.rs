@@ -27,24 +27,6 @@ pub enum BackendKind {
     Cpu,
 }
 
-/// Initialisation (`--init`).
-#[derive(Debug, Clone, Copy, PartialEq, Eq, clap::ValueEnum)]
-pub enum InitKind {
-    Auto,
-    Points,
-    Random,
-}
-
-/// Densification strategy (`--strategy`).
-#[derive(Debug, Clone, Copy, PartialEq, Eq, clap::ValueEnum)]
-pub enum StrategyArg {
-    /// INRIA adaptive density control (clone, split, prune, opacity reset).
-    Default,
-    /// 3DGS-MCMC (Kheradmand et al. 2024): relocate dead splats, grow 5% per
-    /// refinement up to min(1 000 000, --max-splats), position noise, L1 regularisers.
-    Mcmc,
-}
-
 /// Make a backend; says which on stderr.
 pub fn make_backend(kind: BackendKind, ctx: &Ctx) -> anyhow::Result<Box<dyn TrainBackend>> {
     make_train_backend(kind, false, ctx)
@@ -102,8 +84,8 @@ pub struct Args {
     /// COLMAP model folder whose poses and points replace the scene's.
     #[arg(long)]
     pub poses: Option<PathBuf>,
-    /// Training steps (INRIA default 30000).
-    #[arg(long, default_value_t = 30_000)]
+    /// Training steps (INRIA: 30000).
+    #[arg(long, default_value_t = TrainOptions::default().steps)]
     pub steps: u32,
     #[arg(long, value_enum, default_value_t = BackendKind::Auto)]
     pub backend: BackendKind,
@@ -113,18 +95,18 @@ pub struct Args {
     /// Hold out every Nth frame for testing when the scene has no split.json (0 = none).
     #[arg(long, default_value_t = 0)]
     pub holdout_every: usize,
-    /// D-SSIM weight λ (0.2; 0 disables SSIM).
-    #[arg(long, default_value_t = 0.2)]
+    /// D-SSIM weight λ (INRIA: 0.2; 0 disables SSIM).
+    #[arg(long, default_value_t = TrainOptions::default().ssim_weight)]
     pub ssim_weight: f32,
     /// Highest SH degree (0..=3).
-    #[arg(long, default_value_t = 3)]
+    #[arg(long, default_value_t = TrainOptions::default().sh_degree)]
     pub sh_degree: u32,
     /// Cap on the number of splats (MCMC: its cap is min(1 000 000, this)).
-    #[arg(long, default_value_t = 3_000_000)]
+    #[arg(long, default_value_t = splat::strategy::DefaultStrategyOptions::default().max_splats)]
     pub max_splats: usize,
     /// Densification strategy.
-    #[arg(long, value_enum, default_value_t = StrategyArg::Default)]
-    pub strategy: StrategyArg,
+    #[arg(long, value_enum, default_value_t = splat::strategy::StrategyKind::Default)]
+    pub strategy: splat::strategy::StrategyKind,
     /// Default strategy: first step that densifies (INRIA 500).
     #[arg(long, default_value_t = splat::strategy::DefaultStrategyOptions::default().densify_from)]
     pub densify_from: u32,
@@ -156,8 +138,8 @@ pub struct Args {
     #[arg(long, default_value_t = TrainOptions::default().sh_degree_every)]
     pub sh_degree_every: u32,
     /// Initialisation source.
-    #[arg(long, value_enum, default_value_t = InitKind::Auto)]
-    pub init: InitKind,
+    #[arg(long, value_enum, default_value_t = InitMode::Auto)]
+    pub init: InitMode,
     /// Random background each step.
     #[arg(long)]
     pub random_background: bool,
@@ -175,7 +157,7 @@ pub struct Args {
     #[arg(long)]
     pub resume: Option<PathBuf>,
     /// Random seed.
-    #[arg(long, default_value_t = 42)]
+    #[arg(long, default_value_t = TrainOptions::default().seed)]
     pub seed: u64,
     /// Output folder.
     #[arg(long)]
@@ -301,11 +283,7 @@ impl Args {
             checkpoint_every: self.checkpoint_every,
             time_limit_s: self.max_minutes * 60.0,
             seed: self.seed,
-            init: match self.init {
-                InitKind::Auto => InitMode::Auto,
-                InitKind::Points => InitMode::Points,
-                InitKind::Random => InitMode::Random,
-            },
+            init: self.init,
             sh_degree_every: self.sh_degree_every,
             strategy: splat::strategy::DefaultStrategyOptions {
                 max_splats: self.max_splats,
@@ -317,10 +295,7 @@ impl Args {
                 prune_screen_px: self.prune_screen_px,
                 ..Default::default()
             },
-            strategy_kind: match self.strategy {
-                StrategyArg::Default => splat::strategy::StrategyKind::Default,
-                StrategyArg::Mcmc => splat::strategy::StrategyKind::Mcmc,
-            },
+            strategy_kind: self.strategy,
             mcmc: {
                 let d = splat::strategy::McmcStrategyOptions::default();
                 splat::strategy::McmcStrategyOptions {

@@ -19,6 +19,7 @@ use serde::{Deserialize, Serialize};
 /// How a pair's geometric model is chosen.
 #[derive(Debug, Clone, Copy, PartialEq, Eq, Serialize, Deserialize)]
 #[serde(rename_all = "snake_case")]
+#[cfg_attr(feature = "cli", derive(clap::ValueEnum))]
 pub enum ModelSelection {
     /// Always the fundamental matrix (the paper).
     Fundamental,

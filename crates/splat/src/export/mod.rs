@@ -120,10 +120,15 @@ pub(crate) fn name_file(path: &Path, e: SplatError) -> SplatError {
 /// An export format.
 #[derive(Debug, Clone, Copy, PartialEq, Eq, Serialize, Deserialize)]
 #[serde(rename_all = "lowercase")]
+#[cfg_attr(feature = "cli", derive(clap::ValueEnum))]
 pub enum ExportFormat {
+    /// INRIA 3DGS PLY.
     Ply,
+    /// antimatter15 `.splat` (32 bytes per splat, no SH beyond the colour).
     Splat,
+    /// glTF binary with KHR_gaussian_splatting.
     Glb,
+    /// Niantic SPZ (gzip).
     Spz,
 }
 

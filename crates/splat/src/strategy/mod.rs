@@ -73,11 +73,13 @@ pub trait Strategy: Send {
 /// Which densification strategy a run uses.
 #[derive(Debug, Clone, Copy, Default, PartialEq, Eq, Serialize, Deserialize)]
 #[serde(rename_all = "lowercase")]
+#[cfg_attr(feature = "cli", derive(clap::ValueEnum))]
 pub enum StrategyKind {
-    /// INRIA adaptive density control ([`DefaultStrategy`]).
+    /// INRIA adaptive density control: clone, split, prune, opacity reset (`DefaultStrategy`).
     #[default]
     Default,
-    /// 3DGS-MCMC relocation and growth ([`McmcStrategy`]).
+    /// 3DGS-MCMC (Kheradmand et al. 2024): relocate dead splats, grow 5 % per
+    /// refinement up to the cap (`McmcStrategy`).
     Mcmc,
 }
 

@@ -7,6 +7,7 @@ use serde::{Deserialize, Serialize};
 
 /// How to initialise the splats.
 #[derive(Debug, Clone, Copy, PartialEq, Eq, Serialize, Deserialize)]
+#[cfg_attr(feature = "cli", derive(clap::ValueEnum))]
 pub enum InitMode {
     /// COLMAP points3D when the scene has them, else random.
     Auto,
