@@ -51,6 +51,15 @@ pub fn read_mask(path: impl AsRef<Path>) -> Result<GrayImage> {
     Ok(binarise(&read_gray8(path)?, KEEP, IGNORE))
 }
 
+/// Read a nerfstudio mask (`mask_path`: nonzero → 255 keep, 0 → 0 ignore).
+pub fn read_mask_nonzero(path: impl AsRef<Path>) -> Result<GrayImage> {
+    let mut m = read_gray8(path)?;
+    for p in m.pixels_mut() {
+        p.0[0] = if p.0[0] > 0 { KEEP } else { IGNORE };
+    }
+    Ok(m)
+}
+
 /// Write a COLMAP keep-mask PNG atomically (binarised at 128).
 pub fn write_mask(path: impl AsRef<Path>, keep: &GrayImage) -> Result<()> {
     write_png_gray8(path, &binarise(keep, KEEP, IGNORE))

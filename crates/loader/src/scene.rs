@@ -8,7 +8,9 @@
 use crate::camera::{Camera, Intrinsics, Pose};
 use crate::colmap::{ColmapModel, find_model_dir, read_model};
 use crate::error::{LoaderError, Result};
-use crate::masks::{check_size, gt_motion_path, mask_path, read_mask, read_moving};
+use crate::masks::{
+    check_size, gt_motion_path, mask_path, read_mask, read_mask_nonzero, read_moving,
+};
 use crate::split::{ResolvedSplit, read_split};
 use crate::transforms::read_transforms;
 use image::imageops::FilterType;
@@ -31,8 +33,12 @@ pub struct Frame {
     pub camera: Option<Camera>,
     /// World-to-camera pose (COLMAP convention), when known.
     pub pose: Option<Pose>,
-    /// `masks/<name>.png` when present (255 keep, 0 moving).
+    /// `masks/<name>.png` when present (255 keep, 0 moving), else the
+    /// frame's nerfstudio `mask_path` from transforms.json.
     pub mask_path: Option<PathBuf>,
+    /// The mask is a nerfstudio one: nonzero keeps, 0 ignores (masks/
+    /// files are binarised at 128 instead).
+    pub mask_nonzero_keeps: bool,
     /// `gt_motion/<stem>.png` when present (255 moving).
     pub gt_motion_path: Option<PathBuf>,
 }
@@ -182,6 +188,24 @@ impl Scene {
             }
         }
 
+        // nerfstudio masks: each frame's `mask_path` in transforms.json,
+        // resolved against the file's real folder (a linked copy still
+        // finds them); used where masks/<name>.png is absent.
+        let tp = root.join("transforms.json");
+        let ns_masks: HashMap<String, PathBuf> = match read_transforms(&tp) {
+            Ok(t) if tp.is_file() => {
+                let base = tp
+                    .canonicalize()
+                    .ok()
+                    .and_then(|p| p.parent().map(Path::to_path_buf))
+                    .unwrap_or_else(|| root.clone());
+                t.mask_paths(&tp, &base)?.into_iter().collect()
+            }
+            // transforms.json unreadable: an error when it gives the poses
+            // (reported above), otherwise not used.
+            _ => HashMap::new(),
+        };
+
         let mut frames = Vec::with_capacity(names.len());
         let mut full_sizes = Vec::with_capacity(names.len());
         for name in &names {
@@ -224,6 +248,8 @@ impl Scene {
                 _ => default_intrinsics(full.0, full.1).scaled_to(loaded.0, loaded.1),
             };
             let mp = mask_path(&root.join("masks"), name);
+            let ns = ns_masks.get(name).filter(|_| !mp.is_file());
+            let mp = ns.cloned().unwrap_or(mp);
             let mask_path = if mp.is_file() {
                 let md = dims(&mp)?;
                 if md != full {
@@ -259,6 +285,7 @@ impl Scene {
                 camera,
                 pose,
                 mask_path,
+                mask_nonzero_keeps: ns.is_some(),
                 gt_motion_path: gp.is_file().then_some(gp),
             });
             full_sizes.push(full);
@@ -344,7 +371,12 @@ impl Scene {
         let Some(p) = &f.mask_path else {
             return Ok(None);
         };
-        self.load_sized(i, read_mask(p)?, p).map(Some)
+        let m = if f.mask_nonzero_keeps {
+            read_mask_nonzero(p)?
+        } else {
+            read_mask(p)?
+        };
+        self.load_sized(i, m, p).map(Some)
     }
 
     /// Frame `i`'s ground-truth motion (255 moving) at the loaded resolution.

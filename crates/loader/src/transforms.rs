@@ -382,6 +382,117 @@ impl Transforms {
     }
 }
 
+/// nerfstudio's per-frame mask key: a single-channel image, path relative to
+/// the transforms.json folder, the image's size; nonzero = use the pixel,
+/// 0 = ignore it (nerfstudio `get_image_mask_tensor_from_path`).
+pub const MASK_PATH_KEY: &str = "mask_path";
+
+/// `path` relative to the directory `from` (both made absolute and
+/// canonical where they exist); absolute when they share no root.
+pub fn relative_path(path: &Path, from: &Path) -> PathBuf {
+    let abs = |p: &Path| {
+        p.canonicalize().unwrap_or_else(|_| {
+            std::env::current_dir()
+                .map(|d| d.join(p))
+                .unwrap_or_else(|_| p.to_path_buf())
+        })
+    };
+    let (p, f) = (abs(path), abs(from));
+    let (pc, fc): (Vec<_>, Vec<_>) = (p.components().collect(), f.components().collect());
+    let common = pc.iter().zip(&fc).take_while(|(a, b)| a == b).count();
+    if common == 0 {
+        return p;
+    }
+    let mut out = PathBuf::new();
+    for _ in common..fc.len() {
+        out.push("..");
+    }
+    for c in &pc[common..] {
+        out.push(c.as_os_str());
+    }
+    out
+}
+
+impl Transforms {
+    /// Each frame's `mask_path` (nerfstudio), as (image file name, mask
+    /// file), resolved against `base` (the transforms.json folder; `path`
+    /// names the file in errors). A listed mask that does not exist, or an
+    /// image that cannot be found, is an error.
+    pub fn mask_paths(&self, path: &Path, base: &Path) -> Result<Vec<(String, PathBuf)>> {
+        let mut out = Vec::new();
+        for (idx, f) in self.frames.iter().enumerate() {
+            let Some(v) = f.extra.get(MASK_PATH_KEY) else {
+                continue;
+            };
+            let Some(m) = v.as_str() else {
+                return Err(LoaderError::format(
+                    path,
+                    format!("frame {idx}: mask_path must be a string, not {v}"),
+                ));
+            };
+            let image =
+                resolve_image_path(base, &f.file_path).ok_or_else(|| LoaderError::Missing {
+                    path: base.join(&f.file_path),
+                    context: format!("image listed in {}", path.display()),
+                })?;
+            let mask = base.join(m);
+            if !mask.is_file() {
+                return Err(LoaderError::Missing {
+                    path: mask,
+                    context: format!("mask_path of frame {idx} in {}", path.display()),
+                });
+            }
+            let name = image
+                .file_name()
+                .map(|s| s.to_string_lossy().into_owned())
+                .unwrap_or_default();
+            out.push((name, mask));
+        }
+        Ok(out)
+    }
+
+    /// A copy for the folder `out_dir` with every frame's `mask_path` set to
+    /// `masks_dir/<image name>.png` (romosplat's keep-masks: 255 keep,
+    /// 0 ignore, single channel, the image's size — nerfstudio's
+    /// convention), and `file_path` rewritten so it still finds the image
+    /// from `out_dir`. `base` is the source transforms.json folder, `path`
+    /// names it in errors. Every frame must have its image and mask.
+    pub fn with_masks(
+        &self,
+        path: &Path,
+        base: &Path,
+        out_dir: &Path,
+        masks_dir: &Path,
+    ) -> Result<Transforms> {
+        let mut t = self.clone();
+        for (idx, f) in t.frames.iter_mut().enumerate() {
+            let image =
+                resolve_image_path(base, &f.file_path).ok_or_else(|| LoaderError::Missing {
+                    path: base.join(&f.file_path),
+                    context: format!("image listed in {}", path.display()),
+                })?;
+            let name = image
+                .file_name()
+                .map(|s| s.to_string_lossy().into_owned())
+                .unwrap_or_default();
+            let mask = crate::masks::mask_path(masks_dir, &name);
+            if !mask.is_file() {
+                return Err(LoaderError::Missing {
+                    path: mask,
+                    context: format!("mask for frame {idx} ({name}) of {}", path.display()),
+                });
+            }
+            let slash = |p: PathBuf| p.to_string_lossy().replace('\\', "/");
+            f.file_path = slash(relative_path(&image, out_dir));
+            f.extra.insert(
+                MASK_PATH_KEY.into(),
+                serde_json::Value::String(slash(relative_path(&mask, out_dir))),
+            );
+        }
+        Ok(t)
+    }
+}
+
 fn camera_from_fields(
     path: &Path,
     idx: usize,
@@ -512,6 +623,110 @@ mod tests {
             id,
             "outside the scene folder",
         );
+    }
+
+    /// A scene folder with two 8x6 frames, a transforms.json with
+    /// extensionless paths, and keep-masks (left half ignored) in `masks`.
+    fn masked_scene(root: &Path, masks: &Path) {
+        for n in ["a.png", "b.png"] {
+            touch_png(&root.join("images").join(n), 8, 6);
+            let m =
+                image::GrayImage::from_fn(8, 6, |x, _| image::Luma([if x < 4 { 0 } else { 255 }]));
+            crate::masks::write_mask(crate::masks::mask_path(masks, n), &m).unwrap();
+        }
+        let json = r#"{"fl_x": 10.0, "fl_y": 10.0, "cx": 4.0, "cy": 3.0, "w": 8.0, "h": 6.0,
+            "frames": [{"file_path": "images/a", "transform_matrix": [[1,0,0,0],[0,1,0,0],[0,0,1,2],[0,0,0,1]]},
+                       {"file_path": "./images/b.png", "transform_matrix": [[1,0,0,1],[0,1,0,0],[0,0,1,2],[0,0,0,1]]}]}"#;
+        std::fs::write(root.join("transforms.json"), json).unwrap();
+    }
+
+    #[test]
+    fn copy_with_mask_paths_round_trips_through_the_loader() {
+        let d = tempfile::tempdir().unwrap();
+        let (scene, out) = (d.path().join("scene"), d.path().join("out"));
+        masked_scene(&scene, &out.join("masks"));
+        let src = scene.join("transforms.json");
+        let before = std::fs::read(&src).unwrap();
+        let t = read_transforms(&src)
+            .unwrap()
+            .with_masks(&src, &scene, &out, &out.join("masks"))
+            .unwrap();
+        let dst = out.join("transforms.json");
+        write_transforms(&dst, &t).unwrap();
+        assert_eq!(
+            std::fs::read(&src).unwrap(),
+            before,
+            "user's file untouched"
+        );
+        // Read back from the copy's folder, as nerfstudio would.
+        let back = read_transforms(&dst).unwrap();
+        assert_eq!(back.frames[0].file_path, "../scene/images/a.png");
+        assert_eq!(back.frames[1].extra["mask_path"], "masks/b.png.png");
+        let frames = back.resolve(&dst, &out).unwrap();
+        assert_eq!(frames[1].name, "b.png");
+        assert!((frames[1].pose.center() - Vector3::new(1.0, 0.0, 2.0)).norm() < 1e-12);
+        let masks = back.mask_paths(&dst, &out).unwrap();
+        assert_eq!(masks.len(), 2);
+        for (name, m) in masks {
+            assert_eq!(m, out.join("masks").join(format!("{name}.png")));
+            let img = crate::io::read_gray8(&m).unwrap();
+            assert_eq!(img.dimensions(), (8, 6));
+            assert_eq!(
+                (img.get_pixel(0, 0).0[0], img.get_pixel(7, 5).0[0]),
+                (0, 255)
+            );
+        }
+        // A frame without its mask is an error naming the file.
+        std::fs::remove_file(out.join("masks/a.png.png")).unwrap();
+        let e = read_transforms(&src)
+            .unwrap()
+            .with_masks(&src, &scene, &out, &out.join("masks"))
+            .unwrap_err()
+            .to_string();
+        assert!(e.contains("a.png.png"), "{e}");
+    }
+
+    #[test]
+    fn nerfstudio_mask_paths_are_scene_masks_nonzero_keeps() {
+        let d = tempfile::tempdir().unwrap();
+        let root = d.path();
+        masked_scene(root, &root.join("ns_masks"));
+        // nerfstudio masks are often 0/1: nonzero keeps.
+        let m = image::GrayImage::from_fn(8, 6, |_, y| image::Luma([u8::from(y >= 3)]));
+        crate::io::write_png_gray8(root.join("ns_masks/b.png.png"), &m).unwrap();
+        let src = root.join("transforms.json");
+        let mut t = read_transforms(&src).unwrap();
+        for (f, n) in t.frames.iter_mut().zip(["a.png", "b.png"]) {
+            f.extra
+                .insert(MASK_PATH_KEY.into(), format!("ns_masks/{n}.png").into());
+        }
+        write_transforms(&src, &t).unwrap();
+        let opts = crate::SceneOptions { downscale: 1 };
+        let scene = crate::Scene::load(root, &opts).unwrap();
+        assert!(scene.frames.iter().all(|f| f.mask_nonzero_keeps));
+        let a = scene.load_mask(0).unwrap().unwrap();
+        assert_eq!((a.get_pixel(0, 0).0[0], a.get_pixel(7, 0).0[0]), (0, 255));
+        let b = scene.load_mask(1).unwrap().unwrap();
+        assert_eq!((b.get_pixel(0, 0).0[0], b.get_pixel(0, 5).0[0]), (0, 255));
+        // masks/<name>.png, romosplat's own, wins over mask_path.
+        crate::masks::write_mask(
+            crate::masks::mask_path(&root.join("masks"), "a.png"),
+            &image::GrayImage::from_pixel(8, 6, image::Luma([255])),
+        )
+        .unwrap();
+        let scene = crate::Scene::load(root, &opts).unwrap();
+        assert!(!scene.frames[0].mask_nonzero_keeps && scene.frames[1].mask_nonzero_keeps);
+        // A listed mask that is missing, or of another size, is an error.
+        crate::io::write_png_gray8(
+            root.join("ns_masks/b.png.png"),
+            &image::GrayImage::new(4, 3),
+        )
+        .unwrap();
+        let e = crate::Scene::load(root, &opts).unwrap_err().to_string();
+        assert!(e.contains("b.png.png") && e.contains("4x3"), "{e}");
+        std::fs::remove_file(root.join("ns_masks/b.png.png")).unwrap();
+        let e = crate::Scene::load(root, &opts).unwrap_err().to_string();
+        assert!(e.contains("b.png.png") && e.contains("mask_path"), "{e}");
     }
 
     #[test]

@@ -8,6 +8,7 @@ pub mod init;
 pub mod io;
 #[cfg(feature = "onnx")]
 pub mod lpips;
+pub mod lpips_alex;
 pub mod metrics;
 pub mod reference;
 pub mod strategy;

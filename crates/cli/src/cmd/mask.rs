@@ -102,7 +102,18 @@ pub struct Args {
 pub fn run(args: &Args, ctx: &Ctx) -> anyhow::Result<serde_json::Value> {
     let opts = options(args)?;
     let report = segment(&args.scene, args.downscale, &opts, ctx)?;
-    Ok(serde_json::to_value(&report)?)
+    let mut out = serde_json::to_value(&report)?;
+    if let Some(dir) = &report.masks_dir {
+        let copy = write_transforms_copy(&args.scene, dir)?;
+        if let Some(c) = &copy {
+            ctx.info(format!(
+                "nerfstudio transforms.json with mask_path: {}",
+                c.display()
+            ));
+        }
+        out["transforms_with_masks"] = serde_json::json!(copy);
+    }
+    Ok(out)
 }
 
 /// A `RomoOptions` JSON file (a partial one: missing fields keep their defaults).
@@ -212,4 +223,19 @@ pub fn segment(
         report.dropped_frames.len()
     ));
     Ok(report)
+}
+
+/// When the scene has a transforms.json, write a copy with every frame's
+/// nerfstudio `mask_path` set to its mask into the mask output folder
+/// (`loader::transforms::write_with_masks`: images outside it are linked
+/// into it, the user's transforms.json is never replaced).
+fn write_transforms_copy(scene: &Path, masks_dir: &Path) -> anyhow::Result<Option<PathBuf>> {
+    let src = scene.join("transforms.json");
+    if !src.is_file() {
+        return Ok(None);
+    }
+    let out = masks_dir.parent().unwrap_or(masks_dir);
+    Ok(Some(loader::transforms::write_with_masks(
+        &src, scene, out, masks_dir,
+    )?))
 }

@@ -12,6 +12,7 @@ pub mod frames;
 pub mod inspect;
 pub mod keyframes;
 pub mod mask;
+pub mod onthego;
 pub mod plan;
 pub mod pose;
 pub mod render;
@@ -53,6 +54,10 @@ pub enum Command {
     Plan(plan::Args),
     /// Summarise a scene folder, COLMAP model, transforms.json or PLY (`inspect PATH`).
     Inspect(inspect::Args),
+    /// The NeRF On-the-go protocol on a scene in its layout: no masks, RoMo
+    /// masks, ground-truth masks, clean oracle side by side
+    /// (`onthego --scene DIR --out DIR [--steps N]`).
+    Onthego(onthego::Args),
     /// Evaluate masks, poses or rendered views.
     #[command(subcommand)]
     Eval(EvalCommand),
@@ -68,7 +73,7 @@ pub enum EvalCommand {
     Masks(eval_masks::Args),
     /// ATE / RPE of predicted poses against ground truth.
     Poses(eval_poses::Args),
-    /// PSNR / SSIM of rendered views against the scene's images.
+    /// PSNR / SSIM / LPIPS of rendered views against the scene's images.
     Views(eval_views::Args),
 }
 
@@ -96,6 +101,7 @@ pub fn dispatch(cmd: &Command, ctx: &Ctx) -> anyhow::Result<serde_json::Value> {
         Command::Keyframes(a) => keyframes::run(a, ctx),
         Command::Plan(a) => plan::run(a, ctx),
         Command::Render(a) => render::run(a, ctx),
+        Command::Onthego(a) => onthego::run(a, ctx),
         Command::Eval(e) => match e {
             EvalCommand::Masks(a) => eval_masks::run(a, ctx),
             EvalCommand::Poses(a) => eval_poses::run(a, ctx),
