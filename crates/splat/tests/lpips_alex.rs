@@ -7,7 +7,7 @@
 //!   made by `scripts/lpips_fixture.py`): runs when the real weights are found
 //!   (`scripts/get_lpips_weights.py`), else says so and passes.
 //! - Weights file round trip and one-line errors.
-#![allow(clippy::unwrap_used, clippy::expect_used)]
+#![allow(clippy::unwrap_used, clippy::expect_used, clippy::needless_range_loop)]
 
 use splat::lpips_alex::{LpipsAlex, Tensor, WeightsLookup, find_weights, write_safetensors};
 use std::collections::BTreeMap;
@@ -68,7 +68,7 @@ fn naive(t: &BTreeMap<String, Tensor>, a: &[f32], b: &[f32], w: usize, h: usize)
             for x in 0..w {
                 for c in 0..3 {
                     let p = img[(y * w + x) * 3 + c] as f64;
-                    d[(c * h + y) * w + x] = ((2.0 * p - 1.0) - shift[c] as f64) / scale[c] as f64;
+                    d[(c * h + y) * w + x] = ((2.0 * p - 1.0) - shift[c]) / scale[c];
                 }
             }
         }

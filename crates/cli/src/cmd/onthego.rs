@@ -71,12 +71,13 @@ fn clean_file(clean: &Path, name: &str) -> Option<PathBuf> {
     p.is_file().then_some(p)
 }
 
-/// A variant's scene folder: every image (clutter ones from `clutter_src`
-/// when given), the poses, split.json and `masks` when given — all links.
+/// A variant's scene folder: every image (clutter ones from the `clean`
+/// folder when given), the poses, split.json and `masks` when given — all
+/// links.
 fn variant_dir(
     scene: &Scene,
     dir: &Path,
-    clutter_src: Option<&dyn Fn(&str) -> Option<PathBuf>>,
+    clean: Option<&Path>,
     masks: Option<&Path>,
 ) -> Result<()> {
     if dir.exists() {
@@ -87,8 +88,8 @@ fn variant_dir(
     let root = &scene.root;
     let clutter = scene.split_indices("clutter");
     for (i, f) in scene.frames.iter().enumerate() {
-        let src = match clutter_src {
-            Some(pick) if clutter.contains(&i) => pick(&f.name).with_context(|| {
+        let src = match clean {
+            Some(c) if clutter.contains(&i) => clean_file(c, &f.name).with_context(|| {
                 format!(
                     "{}: no clean version of {}",
                     root.join("clean").display(),
@@ -232,8 +233,7 @@ pub fn run(args: &Args, ctx: &Ctx) -> Result<serde_json::Value> {
     }
     let clean_root = scene.root.join("clean");
     if clean_root.is_dir() {
-        let pick = |n: &str| clean_file(&clean_root, n);
-        variant_dir(&scene, &vdir("oracle"), Some(&pick), None)?;
+        variant_dir(&scene, &vdir("oracle"), Some(&clean_root), None)?;
         variants.push(("oracle", "(d) clean oracle", vec!["--no-masks".into()]));
     }
 
