@@ -454,17 +454,22 @@ impl Transforms {
     /// A copy for the folder `out_dir` with every frame's `mask_path` set to
     /// `masks_dir/<image name>.png` (romosplat's keep-masks: 255 keep,
     /// 0 ignore, single channel, the image's size — nerfstudio's
-    /// convention), and `file_path` rewritten so it still finds the image
-    /// from `out_dir`. `base` is the source transforms.json folder, `path`
-    /// names it in errors. Every frame must have its image and mask.
+    /// convention), relative to `out_dir`. Every path stays inside
+    /// `out_dir`: an image outside it is listed as `images/<name>` and
+    /// returned as (source, destination) for the caller to place there
+    /// (see [`write_with_masks`]). `base` is the source transforms.json
+    /// folder, `path` names it in errors. Every frame must have its image
+    /// and mask, and `masks_dir` must be inside `out_dir`.
     pub fn with_masks(
         &self,
         path: &Path,
         base: &Path,
         out_dir: &Path,
         masks_dir: &Path,
-    ) -> Result<Transforms> {
+    ) -> Result<(Transforms, Vec<(PathBuf, PathBuf)>)> {
         let mut t = self.clone();
+        let mut place = Vec::new();
+        let slash = |p: PathBuf| p.to_string_lossy().replace('\\', "/");
         for (idx, f) in t.frames.iter_mut().enumerate() {
             let image =
                 resolve_image_path(base, &f.file_path).ok_or_else(|| LoaderError::Missing {
@@ -482,15 +487,74 @@ impl Transforms {
                     context: format!("mask for frame {idx} ({name}) of {}", path.display()),
                 });
             }
-            let slash = |p: PathBuf| p.to_string_lossy().replace('\\', "/");
-            f.file_path = slash(relative_path(&image, out_dir));
+            if !is_inside(out_dir, &mask) {
+                return Err(LoaderError::format(
+                    path,
+                    format!(
+                        "masks folder {} is not inside the output folder {}",
+                        masks_dir.display(),
+                        out_dir.display()
+                    ),
+                ));
+            }
+            f.file_path = if is_inside(out_dir, &image) {
+                slash(relative_path(&image, out_dir))
+            } else {
+                let rel = Path::new("images").join(&name);
+                place.push((image.clone(), out_dir.join(&rel)));
+                slash(rel)
+            };
             f.extra.insert(
                 MASK_PATH_KEY.into(),
                 serde_json::Value::String(slash(relative_path(&mask, out_dir))),
             );
         }
-        Ok(t)
+        Ok((t, place))
     }
+}
+
+/// Write the nerfstudio copy of the transforms.json `src` (folder `base`)
+/// into `out_dir` with every frame's `mask_path` set (see
+/// [`Transforms::with_masks`]). Images outside `out_dir` are hard-linked
+/// (copied across file systems) to `out_dir/images/`, so the copy is a
+/// self-contained scene folder with every path inside it. The copy is
+/// `out_dir/transforms.json`, or `out_dir/transforms_masks.json` when that
+/// would replace `src`. Returns the copy's path.
+pub fn write_with_masks(
+    src: &Path,
+    base: &Path,
+    out_dir: &Path,
+    masks_dir: &Path,
+) -> Result<PathBuf> {
+    let (t, place) = read_transforms(src)?.with_masks(src, base, out_dir, masks_dir)?;
+    let mut seen = std::collections::HashSet::new();
+    for (from, to) in &place {
+        if !seen.insert(to.clone()) {
+            return Err(LoaderError::format(
+                src,
+                format!(
+                    "two frames share the image name {}",
+                    to.file_name().unwrap_or_default().to_string_lossy()
+                ),
+            ));
+        }
+        if let Some(dir) = to.parent() {
+            crate::io::io_ctx(dir, std::fs::create_dir_all(dir))?;
+        }
+        if to.exists() {
+            crate::io::io_ctx(to, std::fs::remove_file(to))?;
+        }
+        if std::fs::hard_link(from, to).is_err() {
+            crate::io::io_ctx(to, std::fs::copy(from, to))?;
+        }
+    }
+    let same = |a: &Path, b: &Path| matches!((a.canonicalize(), b.canonicalize()), (Ok(x), Ok(y)) if x == y);
+    let mut dst = out_dir.join("transforms.json");
+    if same(&dst, src) {
+        dst = out_dir.join("transforms_masks.json");
+    }
+    write_transforms(&dst, &t)?;
+    Ok(dst)
 }
 
 fn camera_from_fields(
@@ -647,21 +711,22 @@ mod tests {
         masked_scene(&scene, &out.join("masks"));
         let src = scene.join("transforms.json");
         let before = std::fs::read(&src).unwrap();
-        let t = read_transforms(&src)
-            .unwrap()
-            .with_masks(&src, &scene, &out, &out.join("masks"))
-            .unwrap();
-        let dst = out.join("transforms.json");
-        write_transforms(&dst, &t).unwrap();
+        let dst = write_with_masks(&src, &scene, &out, &out.join("masks")).unwrap();
+        assert_eq!(dst, out.join("transforms.json"));
         assert_eq!(
             std::fs::read(&src).unwrap(),
             before,
             "user's file untouched"
         );
-        // Read back from the copy's folder, as nerfstudio would.
+        // Read back from the copy's folder, as nerfstudio would: every path
+        // is inside it, the images are placed beside it.
         let back = read_transforms(&dst).unwrap();
-        assert_eq!(back.frames[0].file_path, "../scene/images/a.png");
+        assert_eq!(back.frames[0].file_path, "images/a.png");
         assert_eq!(back.frames[1].extra["mask_path"], "masks/b.png.png");
+        assert_eq!(
+            std::fs::read(out.join("images/b.png")).unwrap(),
+            std::fs::read(scene.join("images/b.png")).unwrap()
+        );
         let frames = back.resolve(&dst, &out).unwrap();
         assert_eq!(frames[1].name, "b.png");
         assert!((frames[1].pose.center() - Vector3::new(1.0, 0.0, 2.0)).norm() < 1e-12);
@@ -676,11 +741,27 @@ mod tests {
                 (0, 255)
             );
         }
+        // The copy is a scene folder our loader reads whole, masks included.
+        let opts = crate::SceneOptions { downscale: 1 };
+        let loaded = crate::Scene::load(&out, &opts).unwrap();
+        assert_eq!(loaded.frames.len(), 2);
+        assert!(loaded.load_mask(1).unwrap().is_some());
+        // Writing again over the first copy works.
+        write_with_masks(&src, &scene, &out, &out.join("masks")).unwrap();
+        // Masks written into the scene folder itself: the copy sits beside
+        // the user's transforms.json, never replacing it, and no image moves.
+        masked_scene(&scene, &scene.join("masks"));
+        let before = std::fs::read(&src).unwrap();
+        let dst = write_with_masks(&src, &scene, &scene, &scene.join("masks")).unwrap();
+        assert_eq!(dst, scene.join("transforms_masks.json"));
+        assert_eq!(std::fs::read(&src).unwrap(), before);
+        let back = read_transforms(&dst).unwrap();
+        assert_eq!(back.frames[0].file_path, "images/a.png");
+        assert_eq!(back.frames[0].extra["mask_path"], "masks/a.png.png");
+        assert_eq!(back.mask_paths(&dst, &scene).unwrap().len(), 2);
         // A frame without its mask is an error naming the file.
         std::fs::remove_file(out.join("masks/a.png.png")).unwrap();
-        let e = read_transforms(&src)
-            .unwrap()
-            .with_masks(&src, &scene, &out, &out.join("masks"))
+        let e = write_with_masks(&src, &scene, &out, &out.join("masks"))
             .unwrap_err()
             .to_string();
         assert!(e.contains("a.png.png"), "{e}");
