@@ -270,6 +270,11 @@ pub fn run(args: &Args, ctx: &Ctx) -> Result<serde_json::Value> {
     for t in &tables {
         print_table(ctx, t);
     }
+    if views.iter().any(|(_, r)| r.lpips.is_none()) {
+        ctx.info(splat::lpips_alex::missing_weights_hint(
+            splat::lpips_alex::default_weights_path().as_deref(),
+        ));
+    }
     let report_path = write_report(out, &scene, timings, tables, &views)?;
     ctx.info(format!("report: {}", report_path.display()));
     summary.insert(
@@ -279,7 +284,7 @@ pub fn run(args: &Args, ctx: &Ctx) -> Result<serde_json::Value> {
             .map(|(l, r)| {
                 (
                     l.clone(),
-                    json!({ "psnr": r.psnr, "ssim": r.ssim, "splats": r.splats }),
+                    json!({ "psnr": r.psnr, "ssim": r.ssim, "lpips": r.lpips, "splats": r.splats }),
                 )
             })
             .collect::<serde_json::Map<_, _>>()
@@ -562,6 +567,7 @@ fn result_tables(
             "training".into(),
             "PSNR".into(),
             "SSIM".into(),
+            "LPIPS".into(),
             "splats".into(),
             "seconds".into(),
         ],
@@ -572,6 +578,7 @@ fn result_tables(
                     l.clone(),
                     format!("{:.2}", r.psnr),
                     format!("{:.4}", r.ssim),
+                    r.lpips.map_or("-".into(), |v| format!("{v:.4}")),
                     r.splats.to_string(),
                     format!("{:.0}", r.seconds),
                 ]

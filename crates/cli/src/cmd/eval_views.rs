@@ -99,6 +99,22 @@ fn load_onnx(model: &Path) -> anyhow::Result<Lpips> {
     )
 }
 
+/// The built-in LPIPS-Alex when its weights are found without being asked
+/// for ($ROMOSPLAT_LPIPS_WEIGHTS, then the default location), for the
+/// commands that add LPIPS to their tables when they can. A file named by
+/// the variable that does not exist is an error; nothing found is `None`.
+pub fn builtin_lpips() -> anyhow::Result<Option<Lpips>> {
+    match find_weights(None) {
+        WeightsLookup::Found(p) => Ok(Some(Lpips::Alex(LpipsAlex::load(&p)?, p))),
+        WeightsLookup::MissingNamed(p) => anyhow::bail!(
+            "{}: LPIPS weights not found; write them with `{}`",
+            p.display(),
+            splat::lpips_alex::GET_WEIGHTS
+        ),
+        WeightsLookup::Absent(_) => Ok(None),
+    }
+}
+
 impl LpipsArgs {
     /// Load the metric. A file named by a flag or by $ROMOSPLAT_LPIPS_WEIGHTS
     /// must exist (error); with nothing named and nothing at the default

@@ -13,6 +13,7 @@
 
 use super::demo::link;
 use super::eval_views::{LpipsArgs, mean_std, score_views};
+use super::train::BackendKind;
 use super::train_common::train_and_eval;
 use crate::Ctx;
 use anyhow::{Context, Result, bail};
@@ -34,15 +35,20 @@ pub struct Args {
     /// Integer image downscale for training and scoring.
     #[arg(long, default_value_t = 1)]
     pub downscale: u32,
-    /// Training backend (auto, wgpu, cpu).
-    #[arg(long, default_value = "auto")]
-    pub backend: String,
+    #[arg(long, value_enum, default_value_t = BackendKind::Auto)]
+    pub backend: BackendKind,
     /// Extra `romosplat train` options for every variant, e.g.
     /// "--max-splats 20000" (one string, split on spaces).
     #[arg(long, default_value = "")]
     pub train_args: String,
     #[command(flatten)]
     pub lpips: LpipsArgs,
+}
+
+#[derive(Debug, clap::Parser)]
+struct TrainCli {
+    #[command(flatten)]
+    args: super::train::Args,
 }
 
 /// One row of the table.
@@ -249,7 +255,22 @@ pub fn run(args: &Args, ctx: &Ctx) -> Result<serde_json::Value> {
         ctx.info(format!("training {label}: {} steps", args.steps));
         let run_dir = out.join("runs").join(key);
         let t0 = std::time::Instant::now();
-        let res = train_and_eval(ctx, &vdir(key), &run_dir, args.steps, &args.backend, &targs)?;
+        let mut argv: Vec<String> = vec![
+            "train".into(),
+            "--scene".into(),
+            vdir(key).display().to_string(),
+            "--out".into(),
+            run_dir.display().to_string(),
+            "--steps".into(),
+            args.steps.to_string(),
+        ];
+        argv.extend(targs);
+        let mut job = <TrainCli as clap::Parser>::try_parse_from(&argv)
+            .context("train options (--train-args)")?
+            .args
+            .job();
+        job.backend = args.backend;
+        let res = train_and_eval(ctx, &job)?;
         let minutes = t0.elapsed().as_secs_f64() / 60.0;
         // Score every variant against the user's scene (the clean `extra`
         // views), so all rows see the same references.
@@ -259,8 +280,7 @@ pub fn run(args: &Args, ctx: &Ctx) -> Result<serde_json::Value> {
             split: "extra".into(),
             poses: None,
             downscale: args.downscale,
-            backend: <super::train::BackendKind as clap::ValueEnum>::from_str(&args.backend, true)
-                .map_err(|e| anyhow::anyhow!("--backend {}: {e}", args.backend))?,
+            backend: args.backend,
         };
         let s = score_views(&views, false, net.as_mut(), ctx)?;
         let psnr: Vec<f64> = s.report.views.iter().map(|v| v.psnr).collect();

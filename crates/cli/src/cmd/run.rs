@@ -814,10 +814,24 @@ fn print_summary(ctx: &Ctx, plan: &Plan, rows: &[StageRow], results: &Results, t
     }
     if let Some(t) = results.train.as_ref().and_then(|t| t.test.as_ref()) {
         ctx.info(format!(
-            "held-out views: PSNR {:.2} dB, SSIM {:.4} ({} views)",
+            "held-out views: PSNR {:.2} dB, SSIM {:.4}{} ({} views)",
             t.mean_psnr,
             t.mean_ssim,
+            results
+                .train
+                .as_ref()
+                .and_then(|r| r.test_lpips)
+                .map_or(String::new(), |l| format!(", LPIPS {l:.4}")),
             t.views.len()
         ));
+        if results
+            .train
+            .as_ref()
+            .is_some_and(|r| r.test_lpips.is_none())
+        {
+            ctx.info(splat::lpips_alex::missing_weights_hint(
+                splat::lpips_alex::default_weights_path().as_deref(),
+            ));
+        }
     }
 }

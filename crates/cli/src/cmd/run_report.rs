@@ -85,10 +85,16 @@ pub fn write_report(plan: &Plan, r: &Results) -> Result<()> {
                 "Held-out views ({})",
                 t.test.as_ref().map_or(0, |e| e.views.len())
             ),
-            header: vec!["PSNR".into(), "SSIM".into(), "splats".into()],
+            header: vec![
+                "PSNR".into(),
+                "SSIM".into(),
+                "LPIPS".into(),
+                "splats".into(),
+            ],
             rows: vec![vec![
                 format!("{:.2}", v.psnr),
                 format!("{:.4}", v.ssim),
+                v.lpips.map_or("-".into(), |l| format!("{l:.4}")),
                 v.splats.to_string(),
             ]],
         });

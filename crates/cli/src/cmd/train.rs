@@ -265,6 +265,9 @@ pub struct TrainOutcome {
     /// Held-out renders (PNG), in the order of `test.views`.
     #[serde(default)]
     pub test_renders: Vec<PathBuf>,
+    /// Mean held-out LPIPS-Alex (when its weights are found).
+    #[serde(default)]
+    pub test_lpips: Option<f64>,
     /// About 100 samples of the loss / PSNR curves.
     pub history: Vec<HistoryPoint>,
     pub options: TrainOptions,
@@ -414,6 +417,7 @@ pub fn train(job: &TrainJob, ctx: &Ctx) -> anyhow::Result<TrainOutcome> {
     ));
     let mut test = None;
     let mut test_renders = Vec::new();
+    let mut test_lpips = None;
     if !test_idx.is_empty() {
         let tviews = load_views(&scene, &test_idx, false)?;
         let ropts = RenderOptions {
@@ -429,6 +433,12 @@ pub fn train(job: &TrainJob, ctx: &Ctx) -> anyhow::Result<TrainOutcome> {
             ev.mean_ssim,
             ev.views.len()
         ));
+        if let Some(mut net) = super::eval_views::builtin_lpips()? {
+            let l = net.score_views(&tviews, &images)?;
+            let mean = super::eval_views::mean_std(&l).0;
+            ctx.info(format!("test views: LPIPS {mean:.4}"));
+            test_lpips = Some(mean);
+        }
         if let Some(dir) = &job.test_renders {
             std::fs::create_dir_all(dir).with_context(|| format!("creating {}", dir.display()))?;
             for (v, img) in tviews.iter().zip(images) {
@@ -452,6 +462,7 @@ pub fn train(job: &TrainJob, ctx: &Ctx) -> anyhow::Result<TrainOutcome> {
         report: rep,
         test,
         test_renders,
+        test_lpips,
         history,
         options: opts,
     };

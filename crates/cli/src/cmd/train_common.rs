@@ -14,6 +14,8 @@ pub struct VariantResult {
     /// Mean held-out PSNR / SSIM (NaN when nothing is held out).
     pub psnr: f64,
     pub ssim: f64,
+    /// Mean held-out LPIPS-Alex, when its weights are found.
+    pub lpips: Option<f64>,
     pub splats: usize,
     /// Wall time of the whole call (load, train, score, render).
     pub seconds: f64,
@@ -35,6 +37,7 @@ impl VariantResult {
         VariantResult {
             psnr,
             ssim,
+            lpips: outcome.test_lpips,
             splats: outcome.report.splats,
             seconds,
             loss_curve: outcome
