@@ -107,6 +107,13 @@ pub struct LabelOptions {
     /// object's residual is about the background's flow, i.e. about v, and
     /// `S > u·v` splits it at random. 0 = off (the paper's global rule).
     pub local_u_floor: f32,
+    /// U needs texture (ours): a pixel whose grey gradient on the working
+    /// grid (central differences, intensity in [0, 1] per grid px) is below
+    /// this cannot be U. Its flow is an interpolation from its
+    /// surroundings (DIS's propagation, the variational smoothness), so its
+    /// residual is no evidence of its own motion: in a textureless sky next
+    /// to a moving edge it is large. 0 = off.
+    pub u_min_gradient: f32,
     /// A frame with fewer than this fraction of textured pixels (gradient
     /// above [`crate::pipeline::TEXTURE_GRADIENT`]) is not used in any pair:
     /// its flow is meaningless (default 0.01).
@@ -136,6 +143,7 @@ impl Default for LabelOptions {
             three_view_u_px: 0.5,
             three_view_l_px: 1.0,
             local_u_floor: 0.0,
+            u_min_gradient: 0.02,
             min_texture_fraction: 0.01,
             min_valid_fraction: 0.05,
             robust: RobustOptions::default(),
@@ -152,11 +160,13 @@ impl LabelOptions {
             || !(0.0..=1.0).contains(&self.f_informative_fraction)
             || !(self.three_view_u_px > 0.0 && self.three_view_l_px > 0.0)
             || !(0.0..=1.0).contains(&self.local_u_floor)
+            || self.u_min_gradient.is_nan()
+            || self.u_min_gradient < 0.0
             || !(0.0..1.0).contains(&self.min_texture_fraction)
             || !(0.0..1.0).contains(&self.min_valid_fraction)
         {
             return Err(crate::RomoError::Options(
-                "labels: need u_factor > l_factor >= 0, fit_points >= 15, f_informative_fraction in [0, 1], three_view_u_px and three_view_l_px > 0, min_texture_fraction and min_valid_fraction in [0, 1)".into(),
+                "labels: need u_factor > l_factor >= 0, fit_points >= 15, f_informative_fraction in [0, 1], three_view_u_px and three_view_l_px > 0, min_texture_fraction and min_valid_fraction in [0, 1), u_min_gradient >= 0".into(),
             ));
         }
         self.robust.validate()

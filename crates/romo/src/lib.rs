@@ -12,8 +12,10 @@ pub mod features;
 pub mod flow;
 pub mod geometry;
 pub mod labels;
+pub mod maxflow;
 pub mod metrics;
 pub mod mlp;
+pub mod objects;
 #[cfg(feature = "onnx")]
 pub mod onnx;
 pub mod pipeline;

@@ -15,6 +15,7 @@ use crate::labels::{
     frame_labels, propagate_u, three_view_residuals,
 };
 use crate::mlp::{Label, Mlp, MlpOptions, TrainReport, train};
+use crate::objects::{Evidence, ObjectMethod, graph_cut};
 use crate::plane::{Plane, Rgb};
 use crate::refine::{RefineOptions, temporal_smooth, temporal_smooth_flow};
 use crate::regions::{RegionOptions, complete, flow_segments};
@@ -328,6 +329,14 @@ struct Prepared {
     c: usize,
     /// Focal length at the working grid (px).
     grid_focal: f64,
+    /// Per frame: grid pixels with texture (gradient of the grid's grey
+    /// image above `labels.u_min_gradient`; all true when that is 0).
+    textured: Vec<Vec<bool>>,
+    /// Frames at the grid's size (object refinement).
+    grid_rgb: Vec<Rgb>,
+    /// Per frame: pixels textured enough for the object refinement's
+    /// geometric evidence (`refine.objects.texture_gradient`).
+    evidence_textured: Vec<Vec<bool>>,
     /// Per pair: why it cannot be used (a textureless frame or too few
     /// cycle-consistent correspondences), None when usable. The fit may
     /// still fail later ([`label_round`]).
@@ -430,6 +439,10 @@ fn prepare(
             .unzip()
     });
     let grid_grays: Vec<Plane> = grays.par_iter().map(|g| g.resize(gw, gh)).collect();
+    let textured_px: Vec<Vec<bool>> = grid_grays
+        .par_iter()
+        .map(|g| gradient_mask(g, o.labels.u_min_gradient))
+        .collect();
     let unusable: Vec<Option<String>> = (0..n - 1)
         .into_par_iter()
         .map(|p| {
@@ -488,7 +501,12 @@ fn prepare(
             .map(|f| fx.extract(f, gw, gh).map(|m| m.resize(gw, gh)))
             .collect::<Result<Vec<_>>>()
     })?;
+    let grid_rgb: Vec<Rgb> = small.par_iter().map(|f| f.resize(gw, gh)).collect();
     drop(small);
+    let evidence_textured: Vec<Vec<bool>> = grid_grays
+        .par_iter()
+        .map(|g| gradient_mask(g, o.refine.objects.texture_gradient))
+        .collect();
     t.time("features", || standardise(&mut maps));
     let c = maps.first().map_or(0, |m| m.c);
     let feats = maps.iter().map(|m| m.pixel_major()).collect();
@@ -501,8 +519,30 @@ fn prepare(
         feats,
         c,
         grid_focal,
+        textured: textured_px,
+        grid_rgb,
+        evidence_textured,
         unusable,
     })
+}
+
+/// Pixels whose central-difference gradient (max of |gx|, |gy|; one-sided
+/// at the border) exceeds `thr`; all true for `thr` 0.
+pub fn gradient_mask(g: &Plane, thr: f32) -> Vec<bool> {
+    let (w, h) = (g.w, g.h);
+    if thr <= 0.0 {
+        return vec![true; w * h];
+    }
+    (0..w * h)
+        .map(|i| {
+            let (x, y) = (i % w, i / w);
+            let (x0, x1) = (x.saturating_sub(1), (x + 1).min(w - 1));
+            let (y0, y1) = (y.saturating_sub(1), (y + 1).min(h - 1));
+            let gx = (g.data[y * w + x1] - g.data[y * w + x0]) / (x1 - x0).max(1) as f32;
+            let gy = (g.data[y1 * w + x] - g.data[y0 * w + x]) / (y1 - y0).max(1) as f32;
+            gx.abs().max(gy.abs()) > thr
+        })
+        .collect()
 }
 
 /// Labels of every frame and the fit of every pair in one round (None for
@@ -601,6 +641,12 @@ fn label_round(
                 )
             {
                 apply_three_view(&mut fl, &e, &o.labels);
+            }
+            if o.labels.u_min_gradient > 0.0 {
+                for (u, t) in fl.u.iter_mut().zip(&pr.textured[t]) {
+                    *u &= *t;
+                }
+                fl.u_coverage = fl.u.iter().filter(|b| **b).count() as f32 / fl.u.len() as f32;
             }
             fl
         })
@@ -795,6 +841,29 @@ pub fn segment_frames_with_labels(
                 if *s < thr {
                     *v = 0.0;
                 }
+            }
+        }
+    }
+    if o.refine.objects.method == ObjectMethod::GraphCut
+        && let Some((labels, _)) = &last
+    {
+        let ev = Evidence {
+            probs: &planes,
+            s: labels.iter().map(|l| l.s.as_slice()).collect(),
+            v: labels.iter().map(|l| l.v).collect(),
+            textured: &pr.evidence_textured,
+            u: labels.iter().map(|l| l.u.as_slice()).collect(),
+            l: labels.iter().map(|l| l.l.as_slice()).collect(),
+            rgb: &pr.grid_rgb,
+            fwd: &pr.fwd,
+            valid_f: &pr.valid_f,
+            u_factor: o.labels.u_factor,
+            l_factor: o.labels.l_factor,
+        };
+        let moving = tm.time("objects", || graph_cut(&ev, &o.refine.objects));
+        for (p, m) in planes.iter_mut().zip(moving) {
+            for (v, b) in p.data.iter_mut().zip(m) {
+                *v = if b { 1.0 } else { 0.0 };
             }
         }
     }

@@ -52,6 +52,9 @@ pub struct RefineOptions {
     /// Passes of the temporal smoothing (each widens its support by one
     /// frame per side; default 1).
     pub temporal_passes: usize,
+    /// Object-level refinement on the grid after the per-pixel steps
+    /// (ours; [`crate::objects`]).
+    pub objects: crate::objects::ObjectOptions,
 }
 
 impl Default for RefineOptions {
@@ -66,6 +69,7 @@ impl Default for RefineOptions {
             temporal_weight: 0.25,
             temporal_along_flow: true,
             temporal_passes: 1,
+            objects: Default::default(),
         }
     }
 }
@@ -84,7 +88,7 @@ impl RefineOptions {
                 .into(),
             ));
         }
-        Ok(())
+        self.objects.validate()
     }
 }
 

@@ -127,10 +127,14 @@ fn pure_rotation_video_is_scored_with_homographies() {
     // 8 pairs only), GRIC 0.783 (22). With the mask flow preset and veto 0.02·v:
     // default 0.798 (P 0.89, R 0.88), H for 22 pairs; F only 0.243; with
     // the colour guide 0.837 (P 0.91, R 0.91); F only 0.245.
+    // With U restricted to textured pixels (`labels.u_min_gradient` 0.02):
+    // default 0.844 (P 0.89, R 0.95), H for 22 pairs; F only 0.736 (P 0.92,
+    // R 0.79): the textureless sky no longer misleads the MLP either way,
+    // and F's degenerate fit still costs recall.
     assert_eq!(hf, 0);
     assert!(h >= 18, "only {h} of 23 pairs chose H");
     assert!(j >= 0.7, "J {j} (precision {p}, recall {r})");
-    assert!(j >= jf + 0.25, "default J {j} vs F-only {jf}");
+    assert!(j >= jf + 0.05, "default J {j} vs F-only {jf}");
 }
 
 /// `mask --downscale N` segments the frames at 1/N but writes the masks at
@@ -169,9 +173,12 @@ fn masks_of_a_downscaled_scene_have_the_images_size() {
         m.j_mean, m.precision, m.recall
     );
     // Measured 2026-11-25: J 0.359, P 0.95, R 0.36 (8 frames at half size:
-    // a short, coarse video; this test is about the masks' size).
+    // a short, coarse video; this test is about the masks' size); with U
+    // restricted to textured pixels (default since 2026-11-26) J 0.121,
+    // P 0.93, R 0.10: at half size the small scene's pedestrians are a few
+    // grid pixels of flat colour, so few of their pixels can be U.
     assert!(
-        m.j_mean >= 0.25 && m.precision >= 0.8,
+        m.j_mean >= 0.08 && m.precision >= 0.8,
         "J {} P {}",
         m.j_mean,
         m.precision
