@@ -37,11 +37,12 @@ use serde::{Deserialize, Serialize};
 /// Which object refinement runs after the per-pixel refinement.
 #[derive(Debug, Clone, Copy, PartialEq, Eq, Serialize, Deserialize, Default)]
 #[serde(rename_all = "snake_case")]
+#[cfg_attr(feature = "cli", derive(clap::ValueEnum))]
 pub enum ObjectMethod {
     /// None: the probabilities are thresholded as they are.
-    #[default]
     Off,
     /// One minimum cut over the space–time graph (module doc).
+    #[default]
     GraphCut,
 }
 
@@ -51,9 +52,9 @@ pub enum ObjectMethod {
 pub struct ObjectOptions {
     /// Method (default: graph cut).
     pub method: ObjectMethod,
-    /// Weight `w_g` of the geometric evidence (default 2).
+    /// Weight `w_g` of the geometric evidence (default 1).
     pub geometry_weight: f32,
-    /// Weight `w_m` of the MLP's probability (default 0.5).
+    /// Weight `w_m` of the MLP's probability (default 1).
     pub mlp_weight: f32,
     /// Weight `w_c` of the colour model (default 0.5).
     pub colour_weight: f32,
@@ -69,9 +70,9 @@ pub struct ObjectOptions {
 impl Default for ObjectOptions {
     fn default() -> Self {
         Self {
-            method: ObjectMethod::Off,
-            geometry_weight: 2.0,
-            mlp_weight: 0.5,
+            method: ObjectMethod::GraphCut,
+            geometry_weight: 1.0,
+            mlp_weight: 1.0,
             colour_weight: 0.5,
             smoothness: 1.0,
             temporal: 1.0,

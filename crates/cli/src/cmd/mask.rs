@@ -96,6 +96,11 @@ pub struct Args {
     /// larger merges more).
     #[arg(long)]
     pub region_k: Option<f32>,
+    /// Object-level refinement: graph-cut (one minimum cut over all frames
+    /// from the geometric evidence, the MLP, a colour model, image contrast
+    /// and the flow; default) or off.
+    #[arg(long, value_enum)]
+    pub objects: Option<romo::objects::ObjectMethod>,
 }
 
 /// Run `romosplat mask`.
@@ -159,6 +164,9 @@ pub fn options(args: &Args) -> anyhow::Result<romo::RomoOptions> {
     opts.labels.three_view &= !args.no_three_view;
     if let Some(k) = args.region_k {
         opts.regions.k = k;
+    }
+    if let Some(m) = args.objects {
+        opts.refine.objects.method = m;
     }
     if let Some(m) = &args.onnx_flow {
         opts.flow_backend = romo::FlowBackend::Onnx {
