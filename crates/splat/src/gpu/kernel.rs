@@ -66,6 +66,26 @@ pub struct KernelDecl {
     pub uses_grad_atomics: bool,
 }
 
+/// Storage buffers per shader stage every WebGPU device allows.
+pub const MIN_STORAGE_BUFFERS_PER_STAGE: usize = 8;
+
+impl KernelDecl {
+    /// Whether the uniform struct is bound as a read-only storage buffer: yes
+    /// whenever the kernel's storage bindings leave room for it. Mesa's
+    /// lavapipe inlines uniform-buffer values that steer control flow and
+    /// compiles a shader variant for every distinct value, so per-step counts
+    /// (splats, intersections) passed in a uniform buffer made it recompile
+    /// during training; storage buffers are not inlined.
+    pub fn uniform_in_storage(&self) -> bool {
+        let storage = self
+            .bindings
+            .iter()
+            .filter(|b| b.kind != BindingKind::Uniform)
+            .count();
+        storage < MIN_STORAGE_BUFFERS_PER_STAGE
+    }
+}
+
 /// Declares one kernel: its [`KernelDecl`] static, a bindings struct and the
 /// host type (`new`, `bind`). The host module adds its own `dispatch`.
 ///
@@ -246,6 +266,7 @@ pub fn shader_source_cols(
     }
     for (i, b) in decl.bindings.iter().enumerate() {
         let space = match b.kind {
+            BindingKind::Uniform if decl.uniform_in_storage() => "storage, read",
             BindingKind::Uniform => "uniform",
             BindingKind::StorageRead => "storage, read",
             BindingKind::StorageRw => "storage, read_write",
@@ -278,6 +299,9 @@ impl Kernel {
                 visibility: wgpu::ShaderStages::COMPUTE,
                 ty: wgpu::BindingType::Buffer {
                     ty: match b.kind {
+                        BindingKind::Uniform if decl.uniform_in_storage() => {
+                            wgpu::BufferBindingType::Storage { read_only: true }
+                        }
                         BindingKind::Uniform => wgpu::BufferBindingType::Uniform,
                         BindingKind::StorageRead => {
                             wgpu::BufferBindingType::Storage { read_only: true }

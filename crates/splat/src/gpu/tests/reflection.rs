@@ -54,6 +54,13 @@ fn shaders_match_host_declarations() {
                     AddressSpace::Storage { access } if access.contains(StorageAccess::STORE) => {
                         BindingKind::StorageRw
                     }
+                    // The uniform struct, bound read-only in storage where
+                    // the kernel has room (`KernelDecl::uniform_in_storage`).
+                    AddressSpace::Storage { .. }
+                        if b.kind == BindingKind::Uniform && decl.uniform_in_storage() =>
+                    {
+                        BindingKind::Uniform
+                    }
                     AddressSpace::Storage { .. } => BindingKind::StorageRead,
                     other => panic!("{what}: {name} has address space {other:?}"),
                 };
