@@ -71,6 +71,17 @@ pub struct Keyframes {
     pub verdicts: Vec<(String, Verdict)>,
 }
 
+impl Keyframes {
+    /// Frames dropped as blurry and as near-duplicates.
+    pub fn dropped(&self) -> (usize, usize) {
+        let count = |f: fn(&Verdict) -> bool| self.verdicts.iter().filter(|(_, v)| f(v)).count();
+        (
+            count(|v| matches!(v, Verdict::Blurry { .. })),
+            count(|v| matches!(v, Verdict::Duplicate { .. })),
+        )
+    }
+}
+
 /// Variance of the 4-neighbour Laplacian over interior pixels.
 pub fn laplacian_variance(p: &Plane) -> f64 {
     if p.w < 3 || p.h < 3 {

@@ -3,7 +3,7 @@
 //! and `OUT/masks` link the kept frames and their masks.
 
 use crate::Ctx;
-use crate::keyframes::{KeyframeOptions, Verdict, link_keyframes, select_keyframes};
+use crate::keyframes::{KeyframeOptions, link_keyframes, select_keyframes};
 use std::path::PathBuf;
 
 /// `romosplat keyframes`
@@ -45,16 +45,7 @@ pub fn run(args: &Args, ctx: &Ctx) -> anyhow::Result<serde_json::Value> {
     };
     let k = select_keyframes(&images, masks.as_deref(), &names, &opts)?;
     link_keyframes(&args.scene, &k.kept, &args.out)?;
-    let blurry = k
-        .verdicts
-        .iter()
-        .filter(|(_, v)| matches!(v, Verdict::Blurry { .. }))
-        .count();
-    let dup = k
-        .verdicts
-        .iter()
-        .filter(|(_, v)| matches!(v, Verdict::Duplicate { .. }))
-        .count();
+    let (blurry, dup) = k.dropped();
     ctx.info(format!(
         "kept {} of {} frames ({blurry} blurry, {dup} near-duplicates dropped) → {}",
         k.kept.len(),

@@ -557,7 +557,6 @@ fn run_frames(p: &Plan, r: &mut Results, ctx: &Ctx) -> Result<serde_json::Value>
 
 /// Keyframes: link the sharp, non-duplicate frames (and their masks) into `OUT/keyframes`.
 fn run_keyframes(p: &Plan, r: &mut Results, ctx: &Ctx) -> Result<serde_json::Value> {
-    use crate::keyframes::Verdict;
     let opts = p.keyframes.unwrap_or_default();
     let dir = p.posed_scene();
     // New keyframes invalidate the COLMAP database and model made from the old ones.
@@ -566,12 +565,12 @@ fn run_keyframes(p: &Plan, r: &mut Results, ctx: &Ctx) -> Result<serde_json::Val
     let masks = (!p.no_masks).then(|| p.masks());
     let k = select_keyframes(&p.images(), masks.as_deref(), &names, &opts)?;
     link_keyframes(&p.scene, &k.kept, &dir)?;
-    let count = |f: fn(&Verdict) -> bool| k.verdicts.iter().filter(|(_, v)| f(v)).count();
+    let (blurry, duplicates) = k.dropped();
     let outcome = KeyframesOutcome {
         kept: k.kept.len(),
         frames: names.len(),
-        blurry: count(|v| matches!(v, Verdict::Blurry { .. })),
-        duplicates: count(|v| matches!(v, Verdict::Duplicate { .. })),
+        blurry,
+        duplicates,
     };
     ctx.info(format!(
         "  kept {} of {} frames ({} blurry, {} near-duplicates dropped)",
