@@ -13,12 +13,18 @@ ONNX flow path can be tested against a known answer without downloading
 a RAFT checkpoint; any model with the same signature (RAFT, GMFlow exports)
 is used the same way.
 
-Usage: python3 scripts/make_lk_flow_onnx.py OUT.onnx   (needs `pip install onnx`)
+With `--bidirectional` the output is `flow` [1, 4, H, W]: the forward flow
+then the backward one (image2 to image1, the same network with its inputs
+swapped), the layout of `scripts/export_gmflow_onnx.py`'s GMFlow.
+
+Usage: python3 scripts/make_lk_flow_onnx.py [--bidirectional] OUT.onnx
+(needs `pip install onnx`)
 """
 import sys
 
 import numpy as np
 import onnx
+import onnx.compose
 from onnx import TensorProto, helper, numpy_helper
 
 WINDOW = 9
@@ -26,7 +32,7 @@ STEPS = 2
 EPS = 1e-4
 
 
-def main(out):
+def main(out, bidirectional=False):
     nodes, inits = [], []
 
     def const(name, arr):
@@ -118,8 +124,31 @@ def main(out):
     model = helper.make_model(graph, opset_imports=[helper.make_opsetid("", 17)],
                               producer_name="romosplat scripts/make_lk_flow_onnx.py")
     model.ir_version = 8
+    if bidirectional:
+        model = both_ways(model)
     onnx.checker.check_model(model)
     onnx.save(model, out)
+
+
+def both_ways(fwd):
+    """One model running `fwd` on (image1, image2) and on (image2, image1),
+    its outputs concatenated to [1, 4, H, W]."""
+    bwd = onnx.compose.add_prefix(fwd, "bwd_")
+    g = fwd.graph
+    nodes = list(g.node) + [
+        helper.make_node("Identity", ["image2"], ["bwd_image1"]),
+        helper.make_node("Identity", ["image1"], ["bwd_image2"]),
+    ] + list(bwd.graph.node)
+    for n in nodes:
+        n.output[:] = ["fwd_flow" if o == "flow" else o for o in n.output]
+    nodes.append(helper.make_node("Concat", ["fwd_flow", "bwd_flow"], ["flow"], axis=1))
+    out = helper.make_tensor_value_info("flow", TensorProto.FLOAT, ["batch", 4, "height", "width"])
+    graph = helper.make_graph(nodes, "lucas_kanade_flow_both_ways", list(g.input), [out],
+                              list(g.initializer) + list(bwd.graph.initializer))
+    model = helper.make_model(graph, opset_imports=[helper.make_opsetid("", 17)],
+                              producer_name=fwd.producer_name)
+    model.ir_version = 8
+    return model
 
 
 def const_i(name, v, inits):
@@ -128,6 +157,9 @@ def const_i(name, v, inits):
 
 
 if __name__ == "__main__":
-    if len(sys.argv) != 2:
-        sys.exit("usage: make_lk_flow_onnx.py OUT.onnx")
-    main(sys.argv[1])
+    args = sys.argv[1:]
+    bidir = "--bidirectional" in args
+    args = [a for a in args if a != "--bidirectional"]
+    if len(args) != 1:
+        sys.exit("usage: make_lk_flow_onnx.py [--bidirectional] OUT.onnx")
+    main(args[0], bidir)

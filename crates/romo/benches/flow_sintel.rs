@@ -16,12 +16,18 @@
 //! copies even on an AVX2 CPU; `simd` in the JSON says which ran),
 //! `SIMD=both` (each repetition also runs the baseline copies right before
 //! the AVX2 ones, asserts equal flows, and reports `baseline_ms` and
-//! `simd_speedup` = baseline / AVX2 time, medians paired per pair). Skips
-//! (prints a note) when the data is absent.
+//! `simd_speedup` = baseline / AVX2 time, medians paired per pair),
+//! `PRESET=masks` (`DisOptions::masks()`, the mask stage's),
+//! `ONNX_FLOW=a.onnx[,b.onnx]` (needs `--features onnx` and
+//! `ORT_DYLIB_PATH`: also runs each ONNX flow model once per pair on the RGB
+//! frames through `romo::onnx::OnnxFlow`, padded or shrunk to its input
+//! size; the forward flow's EPE and the time of both directions, `ms`,
+//! go under `onnx` per pair and in the summaries).
+//! Skips (prints a note) when the data is absent.
 #![allow(clippy::unwrap_used, clippy::expect_used)]
 
 use romo::flow::dis::{Dis, DisOptions, DisTimings};
-use romo::flow::{Flow, epe};
+use romo::flow::{Flow, FlowEstimator, epe};
 use romo::plane::Plane;
 use serde_json::{Value, json};
 use std::io::{BufRead, BufReader, Write};
@@ -159,6 +165,43 @@ fn stage_medians(ts: &[DisTimings]) -> serde_json::Map<String, Value> {
         .collect()
 }
 
+/// The ONNX flow models `ONNX_FLOW` names, by file name.
+#[cfg(feature = "onnx")]
+fn onnx_models() -> Vec<(String, Box<dyn FlowEstimator>)> {
+    let Ok(list) = std::env::var("ONNX_FLOW") else {
+        return Vec::new();
+    };
+    list.split(',')
+        .filter(|s| !s.is_empty())
+        .map(|p| {
+            let path = Path::new(p);
+            let net = romo::onnx::OnnxFlow::load(path, 1.0)
+                .unwrap_or_else(|e| panic!("ONNX_FLOW {p}: {e}"));
+            let name = path.file_name().unwrap().to_string_lossy().into_owned();
+            (name, Box::new(net) as Box<dyn FlowEstimator>)
+        })
+        .collect()
+}
+
+#[cfg(not(feature = "onnx"))]
+fn onnx_models() -> Vec<(String, Box<dyn FlowEstimator>)> {
+    assert!(
+        std::env::var_os("ONNX_FLOW").is_none(),
+        "ONNX_FLOW needs `cargo bench -p romo --features onnx`"
+    );
+    Vec::new()
+}
+
+/// One run of an ONNX model on a pair's RGB frames: EPE and time.
+fn onnx_row(net: &dyn FlowEstimator, d: &Path, gt: &Flow, noc: &[bool]) -> Value {
+    let rgb = |f: &str| romo::plane::Rgb::from_image(&image::open(d.join(f)).unwrap().to_rgb32f());
+    let (a, b) = (rgb("frame1.png"), rgb("frame2.png"));
+    let t = std::time::Instant::now();
+    let (f, _) = net.flow_pair(&a, &b).unwrap();
+    let ms = t.elapsed().as_secs_f64() * 1e3;
+    json!({"epe_all": epe(&f, gt, None), "epe_noc": epe(&f, gt, Some(noc)), "ms": ms})
+}
+
 fn main() {
     let dir =
         std::env::var("SINTEL_DIR").unwrap_or_else(|_| "../../../shared/data/sintel-flow".into());
@@ -185,6 +228,7 @@ fn main() {
     let opts: DisOptions = match std::env::var("DIS_OPTS") {
         Ok(s) => serde_json::from_str(&s).unwrap(),
         Err(_) if std::env::var("PRESET").as_deref() == Ok("large") => DisOptions::large_motion(),
+        Err(_) if std::env::var("PRESET").as_deref() == Ok("masks") => DisOptions::masks(),
         Err(_) => Default::default(),
     };
     let filter: Vec<String> = std::env::var("PAIRS")
@@ -196,6 +240,7 @@ fn main() {
         OpenCv::start(&dir)
     };
     let dis = Dis::new(opts.clone());
+    let onnx = onnx_models();
     let mut names: Vec<_> = std::fs::read_dir(&dir)
         .unwrap()
         .map(|e| e.unwrap().file_name().into_string().unwrap())
@@ -261,6 +306,13 @@ fn main() {
                 json!({"epe_all": last["epe_all"], "epe_noc": last["epe_noc"], "ms_median": cms});
             row["ratio"] = json!(ms / cms);
         }
+        let mut by_model = serde_json::Map::new();
+        for (name, model) in &onnx {
+            by_model.insert(name.clone(), onnx_row(model.as_ref(), &d, &gt, &noc));
+        }
+        if !by_model.is_empty() {
+            row["onnx"] = Value::Object(by_model);
+        }
         eprintln!("{row}");
         rows.push(row);
     }
@@ -283,7 +335,16 @@ fn main() {
                 stages.insert(k.clone(), json!(v));
             }
         }
+        let mut onnx_summary = serde_json::Map::new();
+        for (name, _) in &onnx {
+            let get = |k: &'static str| mean(small, &|r| r["onnx"][name.as_str()][k].as_f64());
+            onnx_summary.insert(
+                name.clone(),
+                json!({"epe_all": get("epe_all"), "epe_noc": get("epe_noc"), "ms": get("ms")}),
+            );
+        }
         json!({
+            "onnx": onnx_summary,
             "romo": {"epe_all": mean(small, &|r| r["epe_all"].as_f64()),
                      "epe_noc": mean(small, &|r| r["epe_noc"].as_f64()), "ms": ours_ms},
             "opencv": {"epe_all": mean(small, &|r| r["opencv"]["epe_all"].as_f64()),

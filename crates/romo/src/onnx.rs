@@ -10,18 +10,21 @@
 //! ImageNet-normalised RGB, output `image_embed` [1, 256, 64, 64]) and is
 //! used by setting `input_size` 1024 and `imagenet_norm`.
 //!
-//! Optical flow ([`OnnxFlow`], RAFT-style signature): two inputs f32
-//! [1, 3, H, W] (the first frame, then the second), first output f32
-//! [1, 2, h, w], the flow from the first to the second in pixels of its own
-//! grid (h × w may be the input size, or a fraction of it as RAFT's 1/8
-//! `flow_low`; it is resized and rescaled to the frames). Static input
-//! sizes are read from the model and the frames resized to them; dynamic
-//! ones get the frames resized to the next multiple of 8 (RAFT's
-//! requirement). `scripts/make_lk_flow_onnx.py` writes a
-//! Lucas–Kanade model with this signature, used by the tests.
+//! Optical flow ([`OnnxFlow`]): two inputs f32 [1, 3, H, W] (the first
+//! frame, then the second; RGB, values [0, 1] × `input_scale`), first
+//! output f32 [1, 2, h, w], the flow from the first to the second in
+//! pixels of its own grid (h × w may be the input size, or a fraction of it
+//! as RAFT's 1/8 `flow_low`), or [1, 4, h, w]: forward then backward flow
+//! from one run (`scripts/export_gmflow_onnx.py` writes GMFlow so). A
+//! model with a static size gets the frames padded at the bottom / right
+//! by edge replication, after shrinking them (aspect ratio kept) when they
+//! are larger; its flow is cropped back and rescaled ([`Placement`]).
+//! Dynamic sizes get the frames padded to a multiple of 32.
+//! `scripts/make_lk_flow_onnx.py` writes a Lucas–Kanade model with this
+//! signature, used by the tests.
 
 use crate::features::{FeatureExtractor, FeatureMap, HandFeatures};
-use crate::flow::{Flow, FlowEstimator};
+use crate::flow::{Flow, FlowEstimator, Placement};
 use crate::plane::{Plane, Rgb};
 use crate::{Result, RomoError};
 use ort::session::Session;
@@ -184,6 +187,10 @@ pub struct OnnxFlow {
     pub input_scale: f32,
 }
 
+/// Dynamic model inputs are padded to a multiple of this (GMFlow's 1/8
+/// features split in 2 × 2 windows need 32; RAFT's 8 divides it).
+pub const DYNAMIC_MULTIPLE: usize = 32;
+
 impl OnnxFlow {
     /// Load the runtime from `$ORT_DYLIB_PATH` and the model file; checks
     /// the two-input signature.
@@ -224,10 +231,74 @@ impl OnnxFlow {
         })
     }
 
-    /// The size frames of `w × h` are given to the model at.
+    /// Where frames of `w × h` go in the model's input.
+    pub fn placement(&self, w: usize, h: usize) -> Placement {
+        match self.input_size {
+            Some(size) => Placement::fixed((w, h), size),
+            None => Placement::padded((w, h), DYNAMIC_MULTIPLE),
+        }
+    }
+
+    /// The size (w, h) frames of `w × h` are given to the model at.
     pub fn model_size(&self, w: usize, h: usize) -> (usize, usize) {
-        self.input_size
-            .unwrap_or((w.div_ceil(8).max(1) * 8, h.div_ceil(8).max(1) * 8))
+        self.placement(w, h).input
+    }
+
+    /// Run the model on two frames given as channel planes (1 plane: gray,
+    /// repeated; 3: RGB). Returns the forward flow and, when the model
+    /// outputs [1, 4, h, w] (forward then backward), the backward flow.
+    fn run(&self, a: &[&Plane], b: &[&Plane]) -> Result<(Flow, Option<Flow>)> {
+        let (w, h) = (a[0].w, a[0].h);
+        if a.iter().chain(b).any(|p| (p.w, p.h) != (w, h)) {
+            return Err(RomoError::Input(format!(
+                "flow: frames of {}x{} and {}x{}",
+                w, h, b[0].w, b[0].h
+            )));
+        }
+        let place = self.placement(w, h);
+        let (mw, mh) = place.input;
+        let tensor = |planes: &[&Plane]| {
+            let mut data = Vec::with_capacity(3 * mw * mh);
+            for k in 0..3 {
+                let p = place.place(planes[k.min(planes.len() - 1)]);
+                data.extend(p.data.iter().map(|v| v * self.input_scale));
+            }
+            Tensor::from_array(([1usize, 3, mh, mw], data)).map_err(|e| err("input tensor", e))
+        };
+        let (ta, tb) = (tensor(a)?, tensor(b)?);
+        let mut session = self
+            .session
+            .lock()
+            .map_err(|_| RomoError::Onnx("session lock poisoned".into()))?;
+        let outputs = session
+            .run(ort::inputs![ta, tb])
+            .map_err(|e| err("flow inference", e))?;
+        let (shape, values) = outputs[0]
+            .try_extract_tensor::<f32>()
+            .map_err(|e| err("flow output", e))?;
+        if shape.len() != 4 || shape[0] != 1 || (shape[1] != 2 && shape[1] != 4) {
+            return Err(RomoError::Onnx(format!(
+                "expected a [1, 2, h, w] or [1, 4, h, w] flow output, got {shape:?}"
+            )));
+        }
+        let (oc, oh, ow) = (shape[1] as usize, shape[2] as usize, shape[3] as usize);
+        if values.len() != oc * oh * ow || values.iter().any(|v| !v.is_finite()) {
+            return Err(RomoError::Onnx(
+                "flow output has non-finite values or the wrong length".into(),
+            ));
+        }
+        let plane = |k: usize| Plane {
+            w: ow,
+            h: oh,
+            data: values[k * oh * ow..(k + 1) * oh * ow].to_vec(),
+        };
+        let flow = |k: usize| {
+            place.unplace(&Flow {
+                u: plane(k),
+                v: plane(k + 1),
+            })
+        };
+        Ok((flow(0), (oc == 4).then(|| flow(2))))
     }
 }
 
@@ -238,54 +309,27 @@ impl FlowEstimator for OnnxFlow {
 
     /// Gray frames are given to the model as three equal channels.
     fn flow(&self, i0: &Plane, i1: &Plane) -> Result<Flow> {
-        if (i0.w, i0.h) != (i1.w, i1.h) {
-            return Err(RomoError::Input(format!(
-                "flow: frames of {}x{} and {}x{}",
-                i0.w, i0.h, i1.w, i1.h
-            )));
+        Ok(self.run(&[i0], &[i1])?.0)
+    }
+
+    /// A model with a fixed input gets the video's frames at full size
+    /// when they fit, else as large as fits (aspect ratio kept); one with
+    /// dynamic sizes gets them at the pipeline's flow resolution.
+    fn frame_size(&self, full: (usize, usize), working: (usize, usize)) -> (usize, usize) {
+        match self.input_size {
+            Some(size) => Placement::fixed(full, size).content,
+            None => working,
         }
-        let (w, h) = (i0.w, i0.h);
-        let (mw, mh) = self.model_size(w, h);
-        let tensor = |p: &Plane| {
-            let r = p.resize(mw, mh);
-            let mut data = Vec::with_capacity(3 * mw * mh);
-            for _ in 0..3 {
-                data.extend(r.data.iter().map(|v| v * self.input_scale));
-            }
-            Tensor::from_array(([1usize, 3, mh, mw], data)).map_err(|e| err("input tensor", e))
+    }
+
+    /// RGB frames; one run when the model outputs both directions.
+    fn flow_pair(&self, a: &Rgb, b: &Rgb) -> Result<(Flow, Flow)> {
+        let (ca, cb) = ([&a.c[0], &a.c[1], &a.c[2]], [&b.c[0], &b.c[1], &b.c[2]]);
+        let (fwd, bwd) = self.run(&ca, &cb)?;
+        let bwd = match bwd {
+            Some(f) => f,
+            None => self.run(&cb, &ca)?.0,
         };
-        let (a, b) = (tensor(i0)?, tensor(i1)?);
-        let mut session = self
-            .session
-            .lock()
-            .map_err(|_| RomoError::Onnx("session lock poisoned".into()))?;
-        let outputs = session
-            .run(ort::inputs![a, b])
-            .map_err(|e| err("flow inference", e))?;
-        let (shape, values) = outputs[0]
-            .try_extract_tensor::<f32>()
-            .map_err(|e| err("flow output", e))?;
-        if shape.len() != 4 || shape[0] != 1 || shape[1] != 2 {
-            return Err(RomoError::Onnx(format!(
-                "expected a [1, 2, h, w] flow output, got {shape:?}"
-            )));
-        }
-        let (oh, ow) = (shape[2] as usize, shape[3] as usize);
-        if values.len() != 2 * oh * ow || values.iter().any(|v| !v.is_finite()) {
-            return Err(RomoError::Onnx(
-                "flow output has non-finite values or the wrong length".into(),
-            ));
-        }
-        let plane = |k: usize| Plane {
-            w: ow,
-            h: oh,
-            data: values[k * oh * ow..(k + 1) * oh * ow].to_vec(),
-        };
-        // `Flow::resize` rescales the vectors with the grid.
-        Ok(Flow {
-            u: plane(0),
-            v: plane(1),
-        }
-        .resize(w, h))
+        Ok((fwd, bwd))
     }
 }

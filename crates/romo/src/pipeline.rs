@@ -414,13 +414,26 @@ fn prepare(
     })?;
     progress("flow", 0, n - 1);
     let grays: Vec<Plane> = small.iter().map(|f| f.gray()).collect();
+    // A model with its own input size (ONNX) gets frames at that size,
+    // loaded again from the source rather than upsampled from `small`.
+    let (sw, sh) = flow.frame_size((first.w(), first.h()), (fw, fh));
+    let flow_frame = |i: usize| -> Result<std::borrow::Cow<'_, Rgb>> {
+        if (sw, sh) == (fw, fh) {
+            return Ok(std::borrow::Cow::Borrowed(&small[i]));
+        }
+        let f = src.frame(i)?;
+        Ok(std::borrow::Cow::Owned(if (f.w(), f.h()) == (sw, sh) {
+            f
+        } else {
+            f.resize(sw, sh)
+        }))
+    };
     let flows: Vec<(Flow, Flow)> = t.time("flow", || {
         (0..n - 1)
             .into_par_iter()
             .map(|p| -> Result<(Flow, Flow)> {
-                let f = flow.flow(&grays[p], &grays[p + 1])?.resize(gw, gh);
-                let b = flow.flow(&grays[p + 1], &grays[p])?.resize(gw, gh);
-                Ok((f, b))
+                let (f, b) = flow.flow_pair(&*flow_frame(p)?, &*flow_frame(p + 1)?)?;
+                Ok((f.resize(gw, gh), b.resize(gw, gh)))
             })
             .collect::<Result<Vec<_>>>()
     })?;

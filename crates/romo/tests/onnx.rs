@@ -65,6 +65,12 @@ fn xfeat_encoder_runs() {
 /// temp folder; None (skip) when the runtime, python3 or its `onnx` package
 /// is missing and `CI` is unset.
 fn lk_flow_model(dir: &std::path::Path) -> Option<PathBuf> {
+    lk_model(dir, false)
+}
+
+/// As [`lk_flow_model`]; `bidirectional`: the [1, 4, H, W] output
+/// (forward, then backward flow).
+fn lk_model(dir: &std::path::Path, bidirectional: bool) -> Option<PathBuf> {
     let ci = std::env::var_os("CI").is_some();
     if std::env::var_os("ORT_DYLIB_PATH").is_none() {
         assert!(!ci, "CI set but ORT_DYLIB_PATH missing");
@@ -73,9 +79,14 @@ fn lk_flow_model(dir: &std::path::Path) -> Option<PathBuf> {
     }
     let script =
         PathBuf::from(env!("CARGO_MANIFEST_DIR")).join("../../scripts/make_lk_flow_onnx.py");
-    let out = dir.join("lk_flow.onnx");
+    let out = dir.join(if bidirectional {
+        "lk_flow_both.onnx"
+    } else {
+        "lk_flow.onnx"
+    });
     let ok = std::process::Command::new("python3")
         .arg(&script)
+        .args(bidirectional.then_some("--bidirectional"))
         .arg(&out)
         .status()
         .is_ok_and(|s| s.success());
@@ -108,10 +119,8 @@ fn onnx_flow_recovers_a_known_translation() {
     };
     let net = romo::onnx::OnnxFlow::load(&model, 1.0).unwrap();
     assert_eq!(net.input_size, None, "the LK model has dynamic H, W");
-    // 96×64 goes in as is; 90×60 and 50×34 are resized to multiples of 8
-    // (96×64, 56×40) and their flow back.
-    // Measured errors < 0.005 px; a flow not rescaled from the model grid
-    // would be off by 0.047 (90 → 96) and 0.084 px (50 → 56).
+    // 96×64 goes in as is; 90×60 and 50×34 are padded to multiples of 32
+    // (96×64, 64×64) and their flow cropped back.
     for (w, h, tol_mean) in [(96usize, 64usize, 0.02f32), (90, 60, 0.02), (50, 34, 0.02)] {
         let (dx, dy) = (0.7f32, -0.4f32);
         let f = net
@@ -141,6 +150,54 @@ fn onnx_flow_recovers_a_known_translation() {
         ..Default::default()
     };
     assert_eq!(romo::scene::make_flow(&opts).unwrap().name(), "onnx-flow");
+}
+
+fn mean_flow(f: &romo::flow::Flow) -> (f32, f32) {
+    let (w, h) = (f.w(), f.h());
+    let (mut su, mut sv, mut n) = (0.0f32, 0.0f32, 0.0f32);
+    for y in 10..h - 10 {
+        for x in 10..w - 10 {
+            su += f.u.data[y * w + x];
+            sv += f.v.data[y * w + x];
+            n += 1.0;
+        }
+    }
+    (su / n, sv / n)
+}
+
+/// Forward and backward flow from a [1, 2, h, w] model (two runs) and from
+/// a [1, 4, h, w] one (one run), on RGB frames.
+#[test]
+fn onnx_flow_pair_gives_both_directions() {
+    use romo::flow::FlowEstimator;
+    let dir = tempfile::tempdir().unwrap();
+    let (Some(one_way), Some(both)) = (lk_model(dir.path(), false), lk_model(dir.path(), true))
+    else {
+        return;
+    };
+    let (dx, dy) = (0.6f32, 0.3f32);
+    let rgb = |p: Plane| Rgb {
+        c: [p.clone(), p.clone(), p],
+    };
+    let (a, b) = (
+        rgb(textured(80, 56, 0.0, 0.0)),
+        rgb(textured(80, 56, dx, dy)),
+    );
+    for model in [one_way, both] {
+        let net = romo::onnx::OnnxFlow::load(&model, 1.0).unwrap();
+        let (f, bw) = net.flow_pair(&a, &b).unwrap();
+        let ((fu, fv), (bu, bv)) = (mean_flow(&f), mean_flow(&bw));
+        for (got, want) in [(fu, dx), (fv, dy), (bu, -dx), (bv, -dy)] {
+            assert!(
+                (got - want).abs() < 0.02,
+                "{}: forward ({fu}, {fv}), backward ({bu}, {bv}); truth ({dx}, {dy})",
+                model.display()
+            );
+        }
+        // A single direction from the two-way model is its forward flow.
+        let single = net.flow(&a.gray(), &b.gray()).unwrap();
+        assert!((mean_flow(&single).0 - dx).abs() < 0.02);
+    }
 }
 
 #[test]

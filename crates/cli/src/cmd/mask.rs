@@ -27,9 +27,11 @@ pub struct Args {
     /// features; needs a build with `--features romo/onnx` and ORT_DYLIB_PATH.
     #[arg(long)]
     pub onnx_features: Option<PathBuf>,
-    /// ONNX optical-flow model (RAFT-style: two [1, 3, H, W] images in, a
-    /// [1, 2, h, w] flow out) instead of the built-in DIS; needs a build
-    /// with `--features romo/onnx` and ORT_DYLIB_PATH.
+    /// ONNX optical-flow model instead of the built-in DIS: two [1, 3, H, W]
+    /// RGB images in, a [1, 2, h, w] flow (or [1, 4, h, w]: forward, then
+    /// backward) out, e.g. GMFlow from `scripts/export_gmflow_onnx.py`;
+    /// frames are padded (or shrunk) to a fixed input size. Needs a build
+    /// with `--features onnx` and ORT_DYLIB_PATH.
     #[arg(long)]
     pub onnx_flow: Option<PathBuf>,
     /// Pixel values in [0, 1] are multiplied by this for the flow model

@@ -12,7 +12,7 @@ pub mod simd;
 mod sor;
 pub mod variational;
 
-use crate::plane::Plane;
+use crate::plane::{Plane, Rgb};
 use rayon::prelude::*;
 
 /// A dense flow field: pixel (x, y) of the first frame moves to
@@ -137,4 +137,170 @@ pub trait FlowEstimator: Send + Sync {
     fn name(&self) -> &str;
     /// Flow from `i0` to `i1`.
     fn flow(&self, i0: &Plane, i1: &Plane) -> crate::Result<Flow>;
+    /// The size the pipeline should give frames to [`Self::flow_pair`] at,
+    /// for a video of `full` (w, h) whose flow resolution is `working`.
+    /// Default: `working`.
+    fn frame_size(&self, full: (usize, usize), working: (usize, usize)) -> (usize, usize) {
+        let _ = full;
+        working
+    }
+    /// Forward (`a` → `b`) and backward flow between two colour frames of
+    /// equal size, in pixels of that size. Default: [`Self::flow`] both
+    /// ways on the frames' luma.
+    fn flow_pair(&self, a: &Rgb, b: &Rgb) -> crate::Result<(Flow, Flow)> {
+        let (ga, gb) = (a.gray(), b.gray());
+        Ok((self.flow(&ga, &gb)?, self.flow(&gb, &ga)?))
+    }
+}
+
+/// Where frames go in a flow network's input: resized (aspect ratio kept)
+/// to fit when they are larger than it, never enlarged, then padded at the
+/// bottom and right by edge replication; the network's flow is cropped
+/// back to the frames' region and rescaled to their size.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub struct Placement {
+    /// The frames' size (w, h).
+    pub frame: (usize, usize),
+    /// The size the frames are resized to inside the input (equal to
+    /// `frame` when they fit).
+    pub content: (usize, usize),
+    /// The network's input size (w, h).
+    pub input: (usize, usize),
+}
+
+impl Placement {
+    /// Into a network with a fixed input of `input` (w, h).
+    pub fn fixed(frame: (usize, usize), input: (usize, usize)) -> Self {
+        let (w, h) = (frame.0.max(1), frame.1.max(1));
+        let s = (input.0 as f64 / w as f64)
+            .min(input.1 as f64 / h as f64)
+            .min(1.0);
+        let side = |v: usize, limit: usize| ((v as f64 * s).round() as usize).clamp(1, limit);
+        Self {
+            frame: (w, h),
+            content: (side(w, input.0), side(h, input.1)),
+            input,
+        }
+    }
+
+    /// Into a network with dynamic input sizes that must be multiples of
+    /// `multiple`: padded to the next multiple.
+    pub fn padded(frame: (usize, usize), multiple: usize) -> Self {
+        let (w, h) = (frame.0.max(1), frame.1.max(1));
+        let m = multiple.max(1);
+        Self {
+            frame: (w, h),
+            content: (w, h),
+            input: (w.div_ceil(m) * m, h.div_ceil(m) * m),
+        }
+    }
+
+    /// A frame's plane (of size `frame`) as the network's input plane.
+    pub fn place(&self, p: &Plane) -> Plane {
+        let (cw, ch) = self.content;
+        let r;
+        let c = if (p.w, p.h) == (cw, ch) {
+            p
+        } else {
+            r = p.resize(cw, ch);
+            &r
+        };
+        if (cw, ch) == self.input {
+            return c.clone();
+        }
+        Plane::from_fn(self.input.0, self.input.1, |x, y| {
+            c.at(x.min(cw - 1), y.min(ch - 1))
+        })
+    }
+
+    /// The network's flow (any size covering the whole input, in pixels
+    /// of its own grid) as the flow between the frames, in their pixels.
+    pub fn unplace(&self, f: &Flow) -> Flow {
+        let full = f.resize(self.input.0, self.input.1);
+        let (cw, ch) = self.content;
+        let crop = |p: &Plane| Plane::from_fn(cw, ch, |x, y| p.at(x, y));
+        Flow {
+            u: crop(&full.u),
+            v: crop(&full.v),
+        }
+        .resize(self.frame.0, self.frame.1)
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    #![allow(clippy::unwrap_used, clippy::expect_used)]
+    use super::*;
+
+    #[test]
+    fn frames_fit_a_fixed_input_without_enlarging() {
+        // DAVIS frames in GMFlow's 480×864 export: padded only.
+        let p = Placement::fixed((854, 480), (864, 480));
+        assert_eq!((p.content, p.input), ((854, 480), (864, 480)));
+        // Sintel in a 288×512 export: halved, then padded at the bottom.
+        let p = Placement::fixed((1024, 436), (512, 288));
+        assert_eq!(p.content, (512, 218));
+        // DAVIS at the mask stage's flow resolution: exact.
+        assert_eq!(Placement::fixed((854, 480), (512, 288)).content, (512, 288));
+        // Smaller frames are padded, never enlarged.
+        assert_eq!(Placement::fixed((100, 60), (512, 288)).content, (100, 60));
+        let d = Placement::padded((854, 480), 32);
+        assert_eq!((d.content, d.input), ((854, 480), (864, 480)));
+    }
+
+    #[test]
+    fn padding_replicates_the_last_row_and_column() {
+        let p = Placement::fixed((5, 3), (8, 4));
+        let src = Plane::from_fn(5, 3, |x, y| (10 * y + x) as f32);
+        let out = p.place(&src);
+        assert_eq!((out.w, out.h), (8, 4));
+        assert_eq!(out.at(2, 1), 12.0);
+        assert_eq!(out.at(7, 1), 14.0);
+        assert_eq!(out.at(3, 3), 23.0);
+        assert_eq!(out.at(7, 3), 24.0);
+    }
+
+    /// A constant motion of the frames, as the network sees it on its input
+    /// grid (scaled with the content), comes back in the frames' pixels;
+    /// values the network puts in the padding never reach the frames.
+    #[test]
+    fn flow_is_cropped_and_rescaled_back_to_the_frames() {
+        let (du, dv) = (2.0f32, -1.0f32);
+        for (frame, input, out_div) in [
+            ((1024, 436), (512, 288), 1),
+            ((854, 480), (512, 288), 1),
+            ((854, 480), (512, 288), 8),
+            ((90, 60), (96, 64), 1),
+        ] {
+            let p = Placement::fixed(frame, input);
+            let (sx, sy) = (
+                p.content.0 as f32 / frame.0 as f32,
+                p.content.1 as f32 / frame.1 as f32,
+            );
+            let (ow, oh) = (input.0 / out_div, input.1 / out_div);
+            let (cw, ch) = (p.content.0 / out_div, p.content.1 / out_div);
+            let field = |d: f32, s: f32| {
+                Plane::from_fn(ow, oh, |x, y| {
+                    if out_div == 1 && (x >= cw || y >= ch) {
+                        1e3
+                    } else {
+                        d * s / out_div as f32
+                    }
+                })
+            };
+            let net = Flow {
+                u: field(du, sx),
+                v: field(dv, sy),
+            };
+            let f = p.unplace(&net);
+            assert_eq!((f.w(), f.h()), frame);
+            for (k, d) in [(&f.u, du), (&f.v, dv)] {
+                let worst = k.data.iter().map(|v| (v - d).abs()).fold(0.0f32, f32::max);
+                assert!(
+                    worst < 1e-3,
+                    "{frame:?} in {input:?} /{out_div}: off by {worst}"
+                );
+            }
+        }
+    }
 }
