@@ -319,3 +319,46 @@ fn toml_errors_are_one_line() {
         &["bad.toml", "line "],
     );
 }
+
+/// A camera that only turns gives COLMAP nothing to triangulate. COLMAP
+/// still builds a model from a few noisy points on this short pan; `pose`
+/// reads the matcher's verdicts from its database and warns that there is
+/// little or no parallax, and its report counts the pairs. When the mapper
+/// fails, the error names "no parallax" as the cause.
+#[test]
+fn pure_rotation_pose_names_no_parallax() {
+    let spec = std::fs::read_to_string(
+        Path::new(env!("CARGO_MANIFEST_DIR")).join("../../scenes/rotation.toml"),
+    )
+    .unwrap();
+    // The same pan, cut to 4 small frames so the test takes seconds.
+    let spec = spec
+        .replace("frames = 16", "frames = 4")
+        .replace("width = 320", "width = 240")
+        .replace("height = 240", "height = 180")
+        .replace("supersample = 3", "supersample = 1")
+        .replace("test_views = 2", "test_views = 0");
+    assert!(spec.contains("frames = 4") && spec.contains("test_views = 0"));
+    let dir = tempfile::tempdir().unwrap();
+    let toml = dir.path().join("rotation.toml");
+    std::fs::write(&toml, spec).unwrap();
+    let scene = dir.path().join("rot");
+    let (code, err) = romosplat(&["scene", "generate", s(&toml), "--out", s(&scene)]);
+    assert_eq!(code, 0, "{err}");
+    let out = Command::new(env!("CARGO_BIN_EXE_romosplat"))
+        .args(["--json", "pose", "--scene", s(&scene), "--no-masks"])
+        .env("XDG_RUNTIME_DIR", std::env::temp_dir())
+        .output()
+        .unwrap();
+    let err = String::from_utf8_lossy(&out.stderr);
+    if out.status.success() {
+        assert!(err.contains("little or no parallax"), "{err}");
+        let report: serde_json::Value = serde_json::from_slice(&out.stdout).unwrap();
+        let pairs = &report["pairs"];
+        assert!(pairs["verified"].as_u64().unwrap() > 0, "{report}");
+        assert_eq!(pairs["general"].as_u64(), Some(0), "{report}");
+    } else {
+        let line = err.trim_end().lines().last().unwrap_or_default();
+        assert!(line.contains("no parallax"), "{err}");
+    }
+}

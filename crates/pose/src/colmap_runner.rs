@@ -24,7 +24,10 @@
 //! images already extracted and pairs already matched, so an interrupted run
 //! resumes. When the mapper builds no model at all (typically "No good
 //! initial image pair found"), it is retried once with relaxed initialisation
-//! settings ([`relaxed_init_args`]).
+//! settings ([`relaxed_init_args`]). The matcher's verdicts are read back
+//! from the database ([`crate::pairs`]) to name the cause when no model comes
+//! out ("no parallax" when every verified pair is a homography) and to warn
+//! when a model is built from such pairs.
 
 use crate::error::{PoseError, Result};
 use crate::model_info::read_model_info;
@@ -379,6 +382,10 @@ pub struct ColmapReport {
     /// The mapper built no model at first and was retried with relaxed
     /// initialisation settings.
     pub init_retried: bool,
+    /// What geometric verification found for the image pairs, when the
+    /// database could be read.
+    #[serde(default)]
+    pub pairs: Option<crate::pairs::PairStats>,
     /// Wall time per step.
     pub timings: Vec<StepTime>,
     /// Total wall time, seconds.
@@ -426,6 +433,22 @@ fn check_masks(images: &Path, masks: &Path, names: &[String]) -> Result<()> {
 
 fn arg(k: &str, v: impl ToString) -> [String; 2] {
     [format!("--{k}"), v.to_string()]
+}
+
+/// `base` (`--name value` pairs) with every option that `over` also sets
+/// replaced by `over`'s value, which is appended. COLMAP's option parser
+/// rejects an option given twice.
+fn override_args(base: Vec<String>, over: &[String]) -> Vec<String> {
+    let overridden: std::collections::HashSet<&str> =
+        over.chunks(2).map(|kv| kv[0].as_str()).collect();
+    let mut out: Vec<String> = base
+        .chunks(2)
+        .filter(|kv| !overridden.contains(kv[0].as_str()))
+        .flatten()
+        .cloned()
+        .collect();
+    out.extend(over.iter().cloned());
+    out
 }
 
 fn path_str(p: &Path) -> String {
@@ -725,6 +748,11 @@ pub fn run_colmap_cancellable(
     let out = r.step(step, step, a)?;
     require_success(step, &out)?;
 
+    // The matcher's verdicts on the image pairs: they name the cause when no
+    // model comes out, and warn when one is built without parallax.
+    let pairs = crate::pairs::read_pair_stats(&db).ok();
+    let no_parallax = pairs.is_some_and(|p| p.no_parallax());
+
     // 3. Mapping, retried once with relaxed initialisation.
     let mut a: Vec<String> = Vec::new();
     a.extend(arg("database_path", path_str(&db)));
@@ -747,8 +775,9 @@ pub fn run_colmap_cancellable(
             "no model: retrying once with relaxed initialisation settings".into(),
         );
         fresh_dir(&sparse)?;
-        // Later occurrences of an option win in COLMAP's option parser.
-        a.extend(relaxed_init_args(&opts.mapper));
+        // COLMAP refuses an option given twice, so the relaxed values replace
+        // the ones already in the argument list.
+        let a = override_args(a, &relaxed_init_args(&opts.mapper));
         out = r.step("mapper", "mapper_relaxed", a)?;
         models = read_models(&sparse)?;
         init_retried = true;
@@ -759,21 +788,36 @@ pub fn run_colmap_cancellable(
         } else {
             "COLMAP built no model"
         };
-        let mut msg = format!(
-            "{cause} from {} images{}: the frames have too little parallax or too few static features match; use more frames (a higher --fps or --pose-stride 1), more features, `--matcher exhaustive`{} (mapper log {})",
-            names.len(),
-            if init_retried {
-                ", also with relaxed initialisation settings"
-            } else {
-                ""
-            },
-            if opts.use_masks {
-                " or `--no-masks`"
-            } else {
-                ""
-            },
-            out.log.display()
-        );
+        let retried = if init_retried {
+            ", also with relaxed initialisation settings"
+        } else {
+            ""
+        };
+        // The matcher's verdicts usually name the cause; the generic advice
+        // stands when the database cannot tell.
+        let mask_hint = if opts.use_masks {
+            " or `--no-masks`"
+        } else {
+            ""
+        };
+        let mut msg = match pairs.and_then(|s| s.cause().map(|d| (s, d))) {
+            Some((s, d)) => format!(
+                "{cause} from {} images{retried}: {d}{} (mapper log {})",
+                names.len(),
+                if s.verified == 0 && opts.use_masks {
+                    "; try `--no-masks`"
+                } else {
+                    ""
+                },
+                out.log.display()
+            ),
+            None => format!(
+                "{cause} from {} images{retried}: the frames have too little parallax or too few static features match; use more frames (a higher --fps or --pose-stride 1), more features, `--matcher exhaustive`{} (mapper log {})",
+                names.len(),
+                mask_hint,
+                out.log.display()
+            ),
+        };
         if !out.success {
             msg.push_str(&format!(
                 "; mapper {}: {}",
@@ -784,6 +828,12 @@ pub fn run_colmap_cancellable(
         return Err(PoseError::NoModel(msg));
     }
     require_success("mapper", &out)?;
+    if no_parallax {
+        r.note(
+            "mapper",
+            "warning: every verified image pair is related by a homography: little or no parallax (a camera that mostly rotates, or a flat scene); check the poses".into(),
+        );
+    }
     models.sort_by_key(|(m, _)| {
         (
             std::cmp::Reverse(m.registered()),
@@ -839,6 +889,7 @@ pub fn run_colmap_cancellable(
         database: decision,
         features_reused,
         init_retried,
+        pairs,
         timings: r.timings,
         total_seconds: t0.elapsed().as_secs_f64(),
     })

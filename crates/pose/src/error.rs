@@ -16,6 +16,9 @@ pub enum PoseError {
         #[source]
         source: std::io::Error,
     },
+    /// A COLMAP database could not be read.
+    #[error("{}: cannot read the COLMAP database: {reason}", path.display())]
+    Database { path: PathBuf, reason: String },
     /// The `colmap` executable could not be started.
     #[error(
         "colmap not found (tried `{binary}`: {reason}); install it with `apt-get install -y colmap` or pass its path"

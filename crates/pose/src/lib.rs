@@ -11,6 +11,7 @@ pub mod error;
 pub mod gt_masks;
 pub mod metrics;
 pub mod model_info;
+pub mod pairs;
 pub mod process;
 pub mod progress;
 pub mod resume;

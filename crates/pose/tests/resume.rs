@@ -200,4 +200,11 @@ fn failed_init_retries_once_then_says_why() {
     let relaxed = relaxed_init_args(&opts.mapper).join(" ");
     assert!(lines[1].ends_with(&relaxed), "{}", lines[1]);
     assert!(lines[1].contains("--Mapper.init_min_tri_angle 8"));
+    // COLMAP refuses an option given twice.
+    let opts_given: Vec<&str> = lines[1]
+        .split_whitespace()
+        .filter(|w| w.starts_with("--"))
+        .collect();
+    let unique: std::collections::HashSet<&&str> = opts_given.iter().collect();
+    assert_eq!(unique.len(), opts_given.len(), "{}", lines[1]);
 }
