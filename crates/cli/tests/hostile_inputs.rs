@@ -362,3 +362,94 @@ fn pure_rotation_pose_names_no_parallax() {
         assert!(line.contains("no parallax"), "{err}");
     }
 }
+
+/// Run the binary with writes failing beyond `blocks` 512-byte blocks per
+/// file (RLIMIT_FSIZE, SIGXFSZ ignored, so a write returns EFBIG as a full
+/// disk returns ENOSPC); returns (exit code, stderr).
+fn romosplat_file_limit(blocks: u32, args: &[&str]) -> (i32, String) {
+    let out = Command::new("sh")
+        .arg("-c")
+        .arg(format!(
+            "trap '' XFSZ; ulimit -f {blocks}; exec \"$0\" \"$@\""
+        ))
+        .arg(env!("CARGO_BIN_EXE_romosplat"))
+        .args(args)
+        .arg("--quiet")
+        .env("XDG_RUNTIME_DIR", std::env::temp_dir())
+        .output()
+        .unwrap();
+    (
+        out.status.code().unwrap_or(-1),
+        String::from_utf8_lossy(&out.stderr).into_owned(),
+    )
+}
+
+/// Entries of `dir`, sorted.
+fn entries(dir: &Path) -> Vec<String> {
+    let mut v: Vec<String> = std::fs::read_dir(dir)
+        .unwrap()
+        .map(|e| e.unwrap().file_name().to_string_lossy().into_owned())
+        .collect();
+    v.sort();
+    v
+}
+
+/// A write that fails part way (a full disk) leaves neither the output
+/// folder nor a staging folder behind, and says which file in one line.
+#[test]
+fn failed_writes_leave_no_partial_output() {
+    let dir = tempfile::tempdir().unwrap();
+    // `train` on the 3-image scene: every file it writes fails.
+    let root = dir.path().join("train");
+    scene(&root);
+    let before = entries(&root);
+    let out = root.join("tr");
+    let (code, err) = romosplat_file_limit(
+        0,
+        &[
+            "train",
+            "--scene",
+            s(&root),
+            "--steps",
+            "2",
+            "--out",
+            s(&out),
+        ],
+    );
+    assert_eq!(code, 1, "{err}");
+    assert_eq!(err.trim_end().lines().count(), 1, "{err}");
+    assert!(err.contains("File too large"), "{err}");
+    assert_eq!(entries(&root), before, "{err}");
+
+    // `mask --out` on a small generated scene with a transforms.json: the
+    // masks are written, then the nerfstudio copy of transforms.json fails.
+    let spec = std::fs::read_to_string(
+        Path::new(env!("CARGO_MANIFEST_DIR")).join("../../scenes/rotation.toml"),
+    )
+    .unwrap()
+    .replace("frames = 16", "frames = 4")
+    .replace("test_views = 2", "test_views = 0");
+    let toml = dir.path().join("rot.toml");
+    std::fs::write(&toml, spec).unwrap();
+    let parent = dir.path().join("gen");
+    std::fs::create_dir_all(&parent).unwrap();
+    let sc = parent.join("rot");
+    let (code, err) = romosplat(&["scene", "generate", s(&toml), "--out", s(&sc)]);
+    assert_eq!(code, 0, "{err}");
+    // Masks of 320×240 are about 1 KB, transforms.json about 3 KB.
+    let (code, err) = romosplat_file_limit(
+        4,
+        &["mask", "--scene", s(&sc), "--out", s(&parent.join("m"))],
+    );
+    assert_eq!(code, 1, "{err}");
+    assert_eq!(err.trim_end().lines().count(), 1, "{err}");
+    assert!(err.contains("transforms.json"), "{err}");
+    assert_eq!(entries(&parent), vec!["rot".to_string()], "{err}");
+    // With room, the same command writes masks and the copy.
+    let (code, err) = romosplat(&["mask", "--scene", s(&sc), "--out", s(&parent.join("m"))]);
+    assert_eq!(code, 0, "{err}");
+    assert_eq!(
+        entries(&parent.join("m")),
+        vec!["images", "masks", "transforms.json"]
+    );
+}

@@ -467,6 +467,19 @@ impl Transforms {
         out_dir: &Path,
         masks_dir: &Path,
     ) -> Result<(Transforms, Vec<(PathBuf, PathBuf)>)> {
+        self.with_masks_found_in(path, base, out_dir, masks_dir, masks_dir)
+    }
+
+    /// [`Transforms::with_masks`], with the masks that will be at
+    /// `masks_dir` looked for in `present` (a staging folder).
+    fn with_masks_found_in(
+        &self,
+        path: &Path,
+        base: &Path,
+        out_dir: &Path,
+        masks_dir: &Path,
+        present: &Path,
+    ) -> Result<(Transforms, Vec<(PathBuf, PathBuf)>)> {
         let mut t = self.clone();
         let mut place = Vec::new();
         let slash = |p: PathBuf| p.to_string_lossy().replace('\\', "/");
@@ -481,9 +494,10 @@ impl Transforms {
                 .map(|s| s.to_string_lossy().into_owned())
                 .unwrap_or_default();
             let mask = crate::masks::mask_path(masks_dir, &name);
-            if !mask.is_file() {
+            let found = crate::masks::mask_path(present, &name);
+            if !found.is_file() {
                 return Err(LoaderError::Missing {
-                    path: mask,
+                    path: found,
                     context: format!("mask for frame {idx} ({name}) of {}", path.display()),
                 });
             }
@@ -526,9 +540,35 @@ pub fn write_with_masks(
     out_dir: &Path,
     masks_dir: &Path,
 ) -> Result<PathBuf> {
-    let (t, place) = read_transforms(src)?.with_masks(src, base, out_dir, masks_dir)?;
+    write_with_masks_staged(src, base, out_dir, masks_dir, out_dir)
+}
+
+/// [`write_with_masks`] for an output folder that is being staged: paths
+/// are computed for `out_dir` and `masks_dir` (where the files will be), and
+/// everything, masks included, is read from or written to the same relative
+/// places under `stage` ([`crate::io::Staging::path`]). Returns the copy's
+/// final path.
+pub fn write_with_masks_staged(
+    src: &Path,
+    base: &Path,
+    out_dir: &Path,
+    masks_dir: &Path,
+    stage: &Path,
+) -> Result<PathBuf> {
+    let staged = |p: &Path| match p.strip_prefix(out_dir) {
+        Ok(rel) => stage.join(rel),
+        Err(_) => p.to_path_buf(),
+    };
+    let (t, place) = read_transforms(src)?.with_masks_found_in(
+        src,
+        base,
+        out_dir,
+        masks_dir,
+        &staged(masks_dir),
+    )?;
     let mut seen = std::collections::HashSet::new();
     for (from, to) in &place {
+        let to = &staged(to);
         if !seen.insert(to.clone()) {
             return Err(LoaderError::format(
                 src,
@@ -553,7 +593,7 @@ pub fn write_with_masks(
     if same(&dst, src) {
         dst = out_dir.join("transforms_masks.json");
     }
-    write_transforms(&dst, &t)?;
+    write_transforms(staged(&dst), &t)?;
     Ok(dst)
 }
 

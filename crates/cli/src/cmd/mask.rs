@@ -108,18 +108,15 @@ pub struct Args {
 /// Run `romosplat mask`.
 pub fn run(args: &Args, ctx: &Ctx) -> anyhow::Result<serde_json::Value> {
     let opts = options(args)?;
-    let report = segment(&args.scene, args.downscale, &opts, ctx)?;
+    let (report, copy) = segment_with_copy(&args.scene, args.downscale, &opts, true, ctx)?;
     let mut out = serde_json::to_value(&report)?;
-    if let Some(dir) = &report.masks_dir {
-        let copy = write_transforms_copy(&args.scene, dir)?;
-        if let Some(c) = &copy {
-            ctx.info(format!(
-                "nerfstudio transforms.json with mask_path: {}",
-                c.display()
-            ));
-        }
-        out["transforms_with_masks"] = serde_json::json!(copy);
+    if let Some(c) = &copy {
+        ctx.info(format!(
+            "nerfstudio transforms.json with mask_path: {}",
+            c.display()
+        ));
     }
+    out["transforms_with_masks"] = serde_json::json!(copy);
     Ok(out)
 }
 
@@ -193,6 +190,20 @@ pub fn segment(
     opts: &romo::RomoOptions,
     ctx: &Ctx,
 ) -> anyhow::Result<romo::RomoReport> {
+    Ok(segment_with_copy(scene_dir, downscale, opts, false, ctx)?.0)
+}
+
+/// [`segment`], and with `nerfstudio_copy` also the scene's transforms.json
+/// copy with every frame's `mask_path` ([`write_transforms_copy`]), staged
+/// with the masks so that both appear or neither does. Returns the copy's
+/// path when one was written.
+fn segment_with_copy(
+    scene_dir: &Path,
+    downscale: u32,
+    opts: &romo::RomoOptions,
+    nerfstudio_copy: bool,
+    ctx: &Ctx,
+) -> anyhow::Result<(romo::RomoReport, Option<PathBuf>)> {
     let scene = loader::scene::Scene::load(scene_dir, &loader::scene::SceneOptions { downscale })
         .with_context(|| format!("loading scene {}", scene_dir.display()))?;
     // Masks (and overlays, probabilities) are staged and moved into place
@@ -213,6 +224,11 @@ pub fn segment(
         pb.set_position(done as u64);
     })?;
     pb.finish_and_clear();
+    let copy = if nerfstudio_copy {
+        write_transforms_copy(scene_dir, &out, stage.path())?
+    } else {
+        None
+    };
     stage.commit()?;
     let mut report = report;
     report.masks_dir = Some(out.join("masks"));
@@ -232,20 +248,28 @@ pub fn segment(
         100.0 * moving,
         report.dropped_frames.len()
     ));
-    Ok(report)
+    Ok((report, copy))
 }
 
 /// When the scene has a transforms.json, write a copy with every frame's
-/// nerfstudio `mask_path` set to its mask into the mask output folder
-/// (`loader::transforms::write_with_masks`: images outside it are linked
-/// into it, the user's transforms.json is never replaced).
-fn write_transforms_copy(scene: &Path, masks_dir: &Path) -> anyhow::Result<Option<PathBuf>> {
+/// nerfstudio `mask_path` set to its mask into the mask output folder `out`
+/// (`loader::transforms::write_with_masks_staged`: images outside it are
+/// linked into it, the user's transforms.json is never replaced), through
+/// the staging folder `stage` of `out`.
+fn write_transforms_copy(
+    scene: &Path,
+    out: &Path,
+    stage: &Path,
+) -> anyhow::Result<Option<PathBuf>> {
     let src = scene.join("transforms.json");
     if !src.is_file() {
         return Ok(None);
     }
-    let out = masks_dir.parent().unwrap_or(masks_dir);
-    Ok(Some(loader::transforms::write_with_masks(
-        &src, scene, out, masks_dir,
+    Ok(Some(loader::transforms::write_with_masks_staged(
+        &src,
+        scene,
+        out,
+        &out.join("masks"),
+        stage,
     )?))
 }
