@@ -13,15 +13,17 @@ pub const WORKGROUP_SIZE: u32 = 256;
 #[repr(C)]
 #[derive(Debug, Clone, Copy, Pod, Zeroable)]
 pub struct AdamUniforms {
-    /// Elements in the group.
+    /// Elements updated: splats × `width`.
     pub n: u32,
-    /// Elements per splat when the group has a head with its own rate (SH), else 0.
-    pub stride: u32,
-    /// Leading elements of each stride using `lr_head` (3 = the SH DC of r, g, b).
+    /// Leading elements of each splat's row that are updated.
+    pub width: u32,
+    /// Elements per splat in the buffers (≥ `width`).
+    pub row: u32,
+    /// Leading elements of each row using `lr_head` (3 = the SH DC of r, g, b).
     pub head: u32,
-    /// Sparse update: elements per splat, and only splats with radius > 0
-    /// in `AdamArgs::visible` are updated (parameter and moments); 0 = dense.
-    pub sparse_width: u32,
+    /// 1: only splats with radius > 0 in `AdamArgs::visible` are updated
+    /// (parameter and moments); 0 = dense.
+    pub sparse: u32,
     pub lr: f32,
     pub lr_head: f32,
     pub beta1: f32,
@@ -31,7 +33,6 @@ pub struct AdamUniforms {
     /// sqrt(1 − β2ᵗ).
     pub sbc2: f32,
     pub eps: f32,
-    pub pad2: f32,
 }
 
 impl AdamUniforms {
@@ -40,9 +41,10 @@ impl AdamUniforms {
     pub fn for_step(cfg: &crate::train::adam::AdamConfig, t: i32) -> Self {
         AdamUniforms {
             n: 0,
-            stride: 0,
+            width: 1,
+            row: 1,
             head: 0,
-            sparse_width: 0,
+            sparse: 0,
             lr: 0.0,
             lr_head: 0.0,
             beta1: cfg.beta1,
@@ -50,7 +52,6 @@ impl AdamUniforms {
             bc1: 1.0 - cfg.beta1.powi(t),
             sbc2: (1.0 - cfg.beta2.powi(t)).sqrt(),
             eps: cfg.eps,
-            pad2: 0.0,
         }
     }
 }

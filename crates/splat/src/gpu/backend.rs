@@ -47,6 +47,11 @@ struct State {
     grads: GradBuffers,
     stats: StatsBuffers,
     step: u64,
+    /// Highest SH degree whose coefficients may have non-zero Adam moments
+    /// (from the uploaded moments, then every degree trained since). Adam
+    /// skips the coefficients above it: their gradient is zero and so are
+    /// their moments, which makes torch's update the identity there.
+    sh_moments: u32,
 }
 
 /// The wgpu training backend.
@@ -138,6 +143,20 @@ impl GpuBackend {
     fn moments(&self, a: &Splats) -> std::result::Result<ParamBuffers, GpuError> {
         upload_splats(&self.ctx, a)
     }
+}
+
+/// Highest SH degree with a non-zero coefficient in the moments `m` of
+/// `params` (0 when only the DC terms are non-zero).
+fn moment_degree(m: &Splats, params: &Splats) -> u32 {
+    let k = params.coeffs_per_channel();
+    let mut last = 0;
+    for row in m.sh.chunks_exact(3 * k.max(1)) {
+        if let Some(j) = row.iter().rposition(|&x| x != 0.0) {
+            last = last.max(j / 3);
+        }
+    }
+    // Coefficient index c belongs to degree floor(sqrt(c)).
+    (last as f64).sqrt().floor() as u32
 }
 
 /// Splats → moments container check.
@@ -302,13 +321,14 @@ impl StepKernels {
     ) -> std::result::Result<(), GpuError> {
         let n = st.params.n;
         let k3 = crate::types::sh_coeffs(st.params.sh_degree) as u32 * 3;
+        let k3_live = (crate::types::sh_coeffs(st.sh_moments) as u32 * 3).min(k3);
         let groups = [
             (
                 &st.params.means,
                 &st.grads.means,
                 &st.m.means,
                 &st.v.means,
-                3 * n,
+                3,
                 lr.means,
                 lr.means,
                 0,
@@ -318,7 +338,7 @@ impl StepKernels {
                 &st.grads.log_scales,
                 &st.m.log_scales,
                 &st.v.log_scales,
-                3 * n,
+                3,
                 lr.scales,
                 lr.scales,
                 0,
@@ -328,7 +348,7 @@ impl StepKernels {
                 &st.grads.rotations,
                 &st.m.rotations,
                 &st.v.rotations,
-                4 * n,
+                4,
                 lr.rotations,
                 lr.rotations,
                 0,
@@ -338,7 +358,7 @@ impl StepKernels {
                 &st.grads.opacity_logits,
                 &st.m.opacity_logits,
                 &st.v.opacity_logits,
-                n,
+                1,
                 lr.opacity,
                 lr.opacity,
                 0,
@@ -348,19 +368,20 @@ impl StepKernels {
                 &st.grads.sh,
                 &st.m.sh,
                 &st.v.sh,
-                k3 * n,
+                k3,
                 lr.sh_rest,
                 lr.sh_dc,
-                k3,
+                3,
             ),
         ];
-        for (p, g, m, v, count, lr_rest, lr_head, stride) in groups {
-            let width = count.checked_div(n).unwrap_or(0);
+        for (p, g, m, v, row, lr_rest, lr_head, head) in groups {
+            let width = if head > 0 { k3_live } else { row };
             let uniforms = AdamUniforms {
-                n: count,
-                stride,
-                head: 3,
-                sparse_width: if sparse { width } else { 0 },
+                n: width * n,
+                width,
+                row,
+                head,
+                sparse: sparse as u32,
                 lr: lr_rest,
                 lr_head,
                 ..base
@@ -432,6 +453,7 @@ impl TrainBackend for GpuBackend {
             ));
         }
         let p = upload_splats(&self.ctx, params)?;
+        let sh_moments = moment_degree(&adam.m, params).max(moment_degree(&adam.v, params));
         // Moments may carry a stale sh_degree; give them the params' one.
         let mut m = adam.m.clone();
         let mut v = adam.v.clone();
@@ -447,6 +469,7 @@ impl TrainBackend for GpuBackend {
             grads,
             stats,
             step: adam.step,
+            sh_moments,
         });
         Ok(())
     }
@@ -495,6 +518,9 @@ impl TrainBackend for GpuBackend {
         self.k
             .record_backward(ctx, &mut rec, st, &fs, &loss.v_image, &self.reg)?;
         st.step += 1;
+        st.sh_moments = st
+            .sh_moments
+            .max(input.render.sh_degree.min(st.params.sh_degree));
         let base = AdamUniforms::for_step(&self.adam_config, st.step.min(i32::MAX as u64) as i32);
         self.k.record_adam(
             ctx,

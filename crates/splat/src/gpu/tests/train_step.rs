@@ -11,22 +11,23 @@ use crate::train::adam::AdamConfig;
 use crate::types::{AdamState, RenderOptions, Splats};
 use rand::{Rng, SeedableRng};
 
-/// Uniforms of one Adam step `t` (1-based) over `n` elements: elements with
-/// `k % stride < head` use `lr_head` (stride 0: none); `sparse_width` > 0
-/// is sparse mode.
+/// Uniforms of one Adam step `t` (1-based) over `splats` rows of `row`
+/// floats, the first `width` of each updated; columns < `head` use
+/// `lr_head`; `sparse` is sparse mode.
 fn adam_uniforms(
     cfg: &AdamConfig,
     t: i32,
-    n: usize,
+    splats: usize,
     (lr, lr_head): (f32, f32),
-    (stride, head): (u32, u32),
-    sparse_width: u32,
+    (width, row, head): (u32, u32, u32),
+    sparse: bool,
 ) -> AdamUniforms {
     AdamUniforms {
-        n: n as u32,
-        stride,
+        n: splats as u32 * width,
+        width,
+        row,
         head,
-        sparse_width,
+        sparse: sparse as u32,
         lr,
         lr_head,
         ..AdamUniforms::for_step(cfg, t)
@@ -64,9 +65,9 @@ fn adam_kernel_matches_cpu_formula() {
         let mut g: Vec<f32> = (0..n).map(|_| r.random_range(-1.0f32..1.0)).collect();
         g[7] = f32::NAN; // non-finite gradients count as 0
         let gb = c.upload("g", &g);
-        // stride 10, head 3: elements with k % 10 < 3 use lr_head.
+        // Rows of 10, the first 7 updated; columns < 3 use lr_head.
         let (lr, lr_head) = (0.01f32, 0.05f32);
-        let u = adam_uniforms(&cfg, t, n, (lr, lr_head), (10, 3), 0);
+        let u = adam_uniforms(&cfg, t, n / 10, (lr, lr_head), (7, 10, 3), false);
         run_adam(
             c,
             &adam,
@@ -79,7 +80,7 @@ fn adam_kernel_matches_cpu_formula() {
                 uniforms: u,
             },
         );
-        for k in 0..n {
+        for k in (0..n).filter(|k| k % 10 < 7) {
             let l = if k % 10 < 3 { lr_head } else { lr };
             (m[k], v[k], p[k]) = adam_element(&u, l, (m[k], v[k], p[k], g[k]));
         }
@@ -119,7 +120,8 @@ fn sparse_adam_updates_only_visible_splats() {
     let (pb, mb, vb) = (c.upload("p", &p0), c.upload("m", &m0), c.upload("v", &v0));
     let (gb, visb) = (c.upload("g", &g), c.upload("proj", &proj));
     let lr = 0.01f32;
-    let u = adam_uniforms(&AdamConfig::default(), 1, n, (lr, lr), (0, 0), width as u32);
+    let w = width as u32;
+    let u = adam_uniforms(&AdamConfig::default(), 1, splats, (lr, lr), (w, w, 0), true);
     run_adam(
         c,
         &adam,
@@ -418,4 +420,89 @@ fn sparse_adam_backend_leaves_invisible_splats() {
         .filter(|&i| sp.opacity_logits[i] == dp.opacity_logits[i])
         .count();
     assert!(visible_same * 10 >= (s.len() - 1) * 7, "{visible_same}");
+}
+
+/// Adam skips SH coefficients above every degree trained since the upload
+/// only while their moments are zero (torch's update is then the identity):
+/// a degree-3 model rendered at degree 0 leaves them bit-identical to the
+/// CPU's dense Adam, and with non-zero uploaded moments there it still
+/// updates them (momentum) exactly as the CPU does.
+#[test]
+fn adam_skips_untrained_sh_only_when_its_moments_are_zero() {
+    if ctx().is_none() {
+        return;
+    }
+    let cam = camera(64, 48);
+    let s = random_splats(150, 3, 91, false);
+    let k3 = s.sh.len() / s.len();
+    let mut r = rand_pcg::Pcg64::seed_from_u64(92);
+    let target: Vec<f32> = (0..64 * 48 * 3)
+        .map(|_| r.random_range(0.0f32..1.0))
+        .collect();
+    let input = StepInput {
+        camera: &cam,
+        target: &target,
+        mask: None,
+        view_id: None,
+        lr: LearningRates {
+            means: 1e-3,
+            sh_dc: 2.5e-3,
+            sh_rest: 1.25e-4,
+            opacity: 0.05,
+            scales: 5e-3,
+            rotations: 1e-3,
+        },
+        loss: LossConfig { ssim_weight: 0.0 },
+        render: RenderOptions::default(), // SH degree 0
+    };
+    let mut moving = AdamState::zeros_like(&s);
+    moving.step = 4;
+    for (k, (m, v)) in moving
+        .m
+        .sh
+        .iter_mut()
+        .zip(moving.v.sh.iter_mut())
+        .enumerate()
+    {
+        if k % k3 >= 3 {
+            *m = r.random_range(0.01f32..0.1);
+            *v = r.random_range(0.01f32..0.1);
+        }
+    }
+    for adam in [AdamState::zeros_like(&s), moving] {
+        let mut gpu = GpuBackend::new(&crate::gpu::GpuOptions::default()).unwrap();
+        let mut cpu = CpuBackend::new();
+        let mut out = Vec::new();
+        for b in [&mut gpu as &mut dyn TrainBackend, &mut cpu] {
+            b.upload(&s, &adam).unwrap();
+            b.step(&input).unwrap();
+            out.push(b.download().unwrap());
+        }
+        let rest = |v: &[f32]| -> Vec<f32> {
+            v.iter()
+                .enumerate()
+                .filter(|(k, _)| k % k3 >= 3)
+                .map(|(_, x)| *x)
+                .collect()
+        };
+        let (g, c) = (&out[0], &out[1]);
+        let zero = adam.m.sh.iter().all(|&x| x == 0.0);
+        if zero {
+            assert_eq!(rest(&g.0.sh), rest(&s.sh), "untouched");
+        } else {
+            assert_ne!(rest(&g.0.sh), rest(&s.sh), "momentum moves them");
+        }
+        for (a, b, name) in [
+            (rest(&g.0.sh), rest(&c.0.sh), "params"),
+            (rest(&g.1.m.sh), rest(&c.1.m.sh), "m"),
+            (rest(&g.1.v.sh), rest(&c.1.v.sh), "v"),
+        ] {
+            for (x, y) in a.iter().zip(&b) {
+                assert!(
+                    (x - y).abs() <= 1e-6 * y.abs().max(1.0),
+                    "{name}: {x} vs {y}"
+                );
+            }
+        }
+    }
 }
