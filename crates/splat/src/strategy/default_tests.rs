@@ -42,7 +42,7 @@ fn state(scales: &[f32], grads: &[f32], radii: &[f32]) -> ModelState {
 fn refine(opts: DefaultStrategyOptions, step: u32, st: &mut ModelState) -> RefineReport {
     let mut s = DefaultStrategy::new(opts);
     assert!(s.wants_refine(step));
-    s.refine(step, st, &SceneInfo { extent: EXTENT }, 7)
+    s.refine(step, st, &SceneInfo::extent_only(EXTENT), 7)
 }
 
 #[test]
@@ -155,4 +155,72 @@ fn validate_rejects_bad_screen_threshold() {
         };
         assert!(o.validate().is_err(), "{bad}");
     }
+}
+
+/// A 64×64 camera at the origin looking down +z (near 0.1, far 100).
+fn front_camera() -> crate::types::RenderCamera {
+    crate::types::RenderCamera {
+        width: 64,
+        height: 64,
+        fx: 64.0,
+        fy: 64.0,
+        cx: 32.0,
+        cy: 32.0,
+        rotation: [[1.0, 0.0, 0.0], [0.0, 1.0, 0.0], [0.0, 0.0, 1.0]],
+        translation: [0.0; 3],
+        near: 0.1,
+        far: 100.0,
+    }
+}
+
+#[test]
+fn prunes_splats_culled_in_every_training_view() {
+    // Small splats at z = 5 (0: on axis, seen), z = -5 (1: behind the
+    // camera), x = 50 (2: far outside the image), z = 500 (3: beyond far).
+    let mut st = state(&[0.05; 4], &[0.0; 4], &[1.0; 4]);
+    st.splats.means = vec![
+        [0.0, 0.0, 5.0],
+        [0.0, 0.0, -5.0],
+        [50.0, 0.0, 5.0],
+        [0.0, 0.0, 500.0],
+    ];
+    let cams = [front_camera()];
+    let scene = SceneInfo {
+        extent: EXTENT,
+        cameras: &cams,
+        low_pass: 0.3,
+    };
+    let mut s = DefaultStrategy::new(DefaultStrategyOptions::default());
+    let mut pre = st.clone();
+    assert_eq!(s.prepare(&mut pre, &scene).pruned, 3);
+    assert_eq!(pre.splats.means, vec![[0.0, 0.0, 5.0]]);
+    assert_eq!(pre.adam.m.len(), 1);
+    // At a densification only splats not visible since the last one are
+    // checked: splat 1 was (count 4), so it stays; 2 and 3 go.
+    st.stats.count = vec![4, 4, 0, 0];
+    let rep = s.refine(600, &mut st, &scene, 7);
+    assert_eq!(rep.pruned, 2);
+    assert_eq!(st.splats.means, vec![[0.0, 0.0, 5.0], [0.0, 0.0, -5.0]]);
+    // A second camera looking down −z sees splat 1; without cameras nothing
+    // is judged unseen; off, nothing is pruned.
+    let mut back = front_camera();
+    back.rotation = [[-1.0, 0.0, 0.0], [0.0, 1.0, 0.0], [0.0, 0.0, -1.0]];
+    let two = [front_camera(), back];
+    let mut pre = state(&[0.05; 2], &[0.0; 2], &[1.0; 2]);
+    pre.splats.means = vec![[0.0, 0.0, 5.0], [0.0, 0.0, -5.0]];
+    let both = SceneInfo {
+        cameras: &two,
+        ..scene
+    };
+    assert_eq!(s.prepare(&mut pre.clone(), &both).pruned, 0);
+    assert_eq!(
+        s.prepare(&mut pre.clone(), &SceneInfo::extent_only(EXTENT))
+            .pruned,
+        0
+    );
+    let mut off = DefaultStrategy::new(DefaultStrategyOptions {
+        prune_unseen: false,
+        ..Default::default()
+    });
+    assert_eq!(off.prepare(&mut pre, &scene).pruned, 0);
 }

@@ -13,7 +13,8 @@ pub use default::{DefaultStrategy, DefaultStrategyOptions};
 pub use mcmc::{McmcStrategy, McmcStrategyOptions};
 
 use crate::backend::{MeansNoise, Regularization};
-use crate::types::{AdamState, DensifyStats, Splats};
+use crate::reference::project::{CamT, project_one};
+use crate::types::{AdamState, DensifyStats, RenderCamera, RenderOptions, Splats};
 use serde::{Deserialize, Serialize};
 
 /// The model as the strategy sees it.
@@ -37,10 +38,50 @@ pub struct RefineReport {
 
 /// Scene facts a strategy needs.
 #[derive(Debug, Clone, Copy, PartialEq)]
-pub struct SceneInfo {
+pub struct SceneInfo<'a> {
     /// INRIA `cameras_extent`: 1.1 × the largest distance of a camera centre
     /// from their mean (world units).
     pub extent: f32,
+    /// The training cameras (empty: unknown, nothing is pruned as unseen).
+    pub cameras: &'a [RenderCamera],
+    /// Screen-space low-pass dilation the renders use (px², culling depends on it).
+    pub low_pass: f32,
+}
+
+impl SceneInfo<'_> {
+    /// A scene known only by its extent (no cameras).
+    pub fn extent_only(extent: f32) -> SceneInfo<'static> {
+        SceneInfo {
+            extent,
+            cameras: &[],
+            low_pass: RenderOptions::default().low_pass,
+        }
+    }
+}
+
+/// Splats among `candidates` that the projection culls in every one of
+/// `scene.cameras` (behind / beyond the clip planes, outside the image by
+/// their 3σ radius, or degenerate): they get no gradient from any training
+/// view, so they never change, yet every per-splat kernel pays for them.
+/// Empty when the scene has no cameras.
+pub fn unseen(splats: &Splats, candidates: &[usize], scene: &SceneInfo) -> Vec<usize> {
+    use rayon::prelude::*;
+    if scene.cameras.is_empty() {
+        return Vec::new();
+    }
+    let opts = RenderOptions {
+        low_pass: scene.low_pass,
+        ..RenderOptions::default()
+    };
+    let cams: Vec<CamT<f32>> = scene.cameras.iter().map(CamT::new).collect();
+    candidates
+        .par_iter()
+        .copied()
+        .filter(|&i| {
+            cams.iter()
+                .all(|c| project_one(splats, i, c, &opts).is_none())
+        })
+        .collect()
 }
 
 /// A densification strategy.
@@ -57,6 +98,11 @@ pub trait Strategy: Send {
         scene: &SceneInfo,
         seed: u64,
     ) -> RefineReport;
+    /// Edit the model once before a run's first step (nothing by default).
+    fn prepare(&mut self, state: &mut ModelState, scene: &SceneInfo) -> RefineReport {
+        let _ = (state, scene);
+        RefineReport::default()
+    }
     /// Regularisers the backend adds to every step's gradients (none by default).
     fn regularization(&self) -> Regularization {
         Regularization::default()

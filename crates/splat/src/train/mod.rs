@@ -21,7 +21,7 @@ use crate::io::{Checkpoint, write_checkpoint};
 use crate::strategy::{
     DefaultStrategy, McmcStrategy, ModelState, RefineReport, SceneInfo, Strategy, StrategyKind,
 };
-use crate::types::{AdamState, RenderOptions, Splats};
+use crate::types::{AdamState, DensifyStats, RenderOptions, Splats};
 use rand::seq::SliceRandom;
 use rand::{Rng, SeedableRng};
 use serde::{Deserialize, Serialize};
@@ -104,8 +104,22 @@ impl Trainer<'_> {
             StrategyKind::Mcmc => Box::new(McmcStrategy::new(o.mcmc.clone())),
         };
         self.backend.set_regularization(strategy.regularization())?;
+        let cameras: Vec<_> = self.data.views.iter().map(|v| v.camera).collect();
         let scene = SceneInfo {
             extent: self.data.extent,
+            cameras: &cameras,
+            low_pass: o.low_pass,
+        };
+        let mut pre = ModelState {
+            stats: DensifyStats::zeros(start.splats.len()),
+            splats: start.splats,
+            adam: start.adam,
+        };
+        let prepared = strategy.prepare(&mut pre, &scene);
+        let start = Checkpoint {
+            step: start.step,
+            splats: pre.splats,
+            adam: pre.adam,
         };
         self.backend.upload(&start.splats, &start.adam)?;
         let mut n_splats = start.splats.len();
@@ -113,6 +127,7 @@ impl Trainer<'_> {
         let mut rep = TrainReport {
             backend: self.backend.name(),
             start_step: start.step,
+            pruned: prepared.pruned,
             ..Default::default()
         };
         let mut recent: Vec<(f32, f32)> = Vec::new();
