@@ -6,7 +6,8 @@
 //! Scene: `STEP_BENCH_SCENE` (default `../shared/data/fox` from the repo
 //! root), `STEP_BENCH_DOWNSCALE` (default 4), `STEP_BENCH_STEPS` (default 5);
 //! `STEP_BENCH_PLY` trains splats from a PLY (e.g. a trained scene) instead
-//! of the scene's initial ones.
+//! of the scene's initial ones; `STEP_BENCH_SH` the SH degree rendered
+//! (default 3).
 //! Run: `cargo bench -p splat --bench step_profile`.
 #![allow(clippy::unwrap_used, clippy::expect_used)]
 
@@ -39,6 +40,7 @@ fn main() {
         Ok(p) => splat::io::read_ply(p).unwrap(),
         Err(_) => initial_splats(&scene, &cams, extent, &opts).unwrap().0,
     };
+    let sh_degree: u32 = env_or("STEP_BENCH_SH", 3);
     let v = &views[0];
     let input = StepInput {
         camera: &v.camera,
@@ -48,7 +50,7 @@ fn main() {
         lr: opts.learning_rates(0, extent),
         loss: LossConfig::default(),
         render: RenderOptions {
-            sh_degree: 3,
+            sh_degree,
             ..Default::default()
         },
     };
