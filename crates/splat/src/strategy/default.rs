@@ -24,7 +24,8 @@
 //! are pruned before the first step and at every densification (among those
 //! not visible since the previous one). INRIA and gsplat keep them, but they
 //! get no gradient from any view, so they never change while every per-splat
-//! kernel pays for them: a random init of fox at 270×480 has 30 % of them.
+//! kernel pays for them: 67,735 of the 100,000 splats of fox's random init
+//! (270×480, every 8th view held out).
 
 use super::{
     ModelState, RefineReport, SceneInfo, Strategy, logit, push_splat, retain, rotation, sigmoid,
