@@ -74,6 +74,45 @@ pub fn write_exr(path: impl AsRef<Path>, img: &FloatImage) -> Result<()> {
     })
 }
 
+/// Largest decoded-to-compressed size ratio accepted: zlib (ZIP, ZIPS)
+/// cannot exceed about 1032:1, RLE 128:1, the other codecs less.
+const MAX_EXPANSION: u64 = 1100;
+
+/// Refuse a header whose layers claim more samples than the file could
+/// encode, before the decoder allocates them: allocations stay bounded by
+/// the file's size, never by what a header claims.
+fn check_claimed_size(path: &Path) -> Result<()> {
+    let file_len = std::fs::metadata(path)
+        .map_err(|e| LoaderError::io(path, e))?
+        .len();
+    let meta = exr::meta::MetaData::read_from_file(path, false)
+        .map_err(|e| LoaderError::format(path, format!("EXR decode: {e}")))?;
+    for (i, header) in meta.headers.iter().enumerate() {
+        let pixels = header.layer_size.width() as u64 * header.layer_size.height() as u64;
+        let bytes_per_pixel: u64 = header
+            .channels
+            .list
+            .iter()
+            .map(|c| match c.sample_type {
+                exr::meta::attribute::SampleType::F16 => 2,
+                _ => 4,
+            })
+            .sum();
+        let claimed = pixels.saturating_mul(bytes_per_pixel);
+        if claimed > file_len.saturating_mul(MAX_EXPANSION) {
+            return Err(LoaderError::format(
+                path,
+                format!(
+                    "EXR layer {i} claims {}×{} pixels of {bytes_per_pixel} bytes, more than a {file_len}-byte file can hold",
+                    header.layer_size.width(),
+                    header.layer_size.height()
+                ),
+            ));
+        }
+    }
+    Ok(())
+}
+
 /// Read the first layer of an EXR as a float image. Channels are ordered
 /// R, G, B when present (or Y), otherwise alphabetically; at most 3 are kept.
 pub fn read_exr(path: impl AsRef<Path>) -> Result<FloatImage> {
@@ -84,6 +123,7 @@ pub fn read_exr(path: impl AsRef<Path>) -> Result<FloatImage> {
             context: String::new(),
         });
     }
+    check_claimed_size(path)?;
     let image = read()
         .no_deep_data()
         .largest_resolution_level()
@@ -135,6 +175,37 @@ pub fn read_exr(path: impl AsRef<Path>) -> Result<FloatImage> {
 mod tests {
     #![allow(clippy::unwrap_used, clippy::expect_used)]
     use super::*;
+
+    /// Found by the `exr` fuzz target: a 478-byte file whose data window
+    /// claims 136 GB of samples made the decoder abort on allocation.
+    #[test]
+    fn huge_claimed_size_is_refused_before_allocating() {
+        let bytes: &[u8] =
+            b"v/1\x01\x02\x02\x00\x00chunkCount\x00in\xff\xff\xff\xff\xff\xff\xff\xff\
+              \xff\xfft\x00\x04\x00\x00\x00\x01\x00\x00\x00channels\x00chlist\x00\x13\
+              \x00\x00\x00Y\x00\x02\x00\x00\x00\x00\x00\x00\x00\x01\x00\x00\x00\x01\
+              \x00\x00\x00\x00compression\x00compression\x00\x01\x00\x00\x00\x01lineOr\
+              der\x00lineOrder\x00\x01\x00\x00\x00\x02displayWindow\x00box2i\x00\x10\
+              \x00\x00\x00\x00\x00\x00\x00\x00\x00\x00\x00\x02\x00\x00\x00\x01\x00\x00\
+              \x00pixelAspectRatio\x00float\x00\x04\x00\x00\x00\x00\x00\x80?screenWind\
+              owCenter\x00v2f\x00\x08\x00\x00\x00\x00\x00\x00\x00\x00\x00\x00\x00scree\
+              nWindowWidth\x00float\x00\x04\x00\x00\x00\x00\x00\x80?dataWindow\x00box2\
+              i\x00\x10\x00\x00\x00\x00\x00\x00\x00\x00\x00\x00\xf8\xfd\x00\x00\x00\
+              \x01\x00\x00\x00type\x00string\x00\x0a\x00\x00\x00tiledimagetiles\x00til\
+              edesc\x00\x09\x00\x00\x00@\x00\x00\x00@\x00\x00\x00\x00\x00j\x01\x00\x00\
+              \x00\x00\x00\x00\x00\x00\x00\x00\x00\x00\x00\x00\x00\x00\x00\x00\x00\xff\
+              \xff\xff\xff\xff\xff\xff\xff\xff\xff\xff\x00\x00\x00\x00\x00\x00\x00\x00\
+              \x00\x00\x00\x00\x00\x00\x00\x00\x00\x00\x00\x00\x00\x00\x00\x00\x00\x00\
+              \x00\x00\x00\x00\x00\x00\x00\x00\x00\x00\x00\x00\x00\x00\x00\x00\x00\x00\
+              \x00\x00\x00\x00\x00\x00\x00\x00\x00@\x18\x00\x00\x00\x00\x00\x80\xbf\
+              \x00\x00@\xbf\x00\x00\x00\xbf\x00\x00\x80\xbe\x00\x00\x00\x00\x00\x00\
+              \x80>";
+        let dir = tempfile::tempdir().unwrap();
+        let p = dir.path().join("huge.exr");
+        std::fs::write(&p, bytes).unwrap();
+        let e = read_exr(&p).unwrap_err().to_string();
+        assert!(e.contains("huge.exr") && e.contains("claims"), "{e}");
+    }
 
     #[test]
     fn round_trip_one_two_three_channels() {
