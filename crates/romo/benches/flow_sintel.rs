@@ -203,14 +203,15 @@ fn onnx_row(net: &dyn FlowEstimator, d: &Path, gt: &Flow, noc: &[bool]) -> Value
 }
 
 fn main() {
-    let dir =
-        std::env::var("SINTEL_DIR").unwrap_or_else(|_| "../../../shared/data/sintel-flow".into());
-    let dir = Path::new(&dir);
-    let dir = if dir.exists() {
-        dir.to_path_buf()
-    } else {
-        Path::new("/work/shared/data/sintel-flow").to_path_buf()
-    };
+    // Default: `../shared/data/sintel-flow` beside the repository.
+    let dir = std::env::var("SINTEL_DIR").unwrap_or_else(|_| {
+        concat!(
+            env!("CARGO_MANIFEST_DIR"),
+            "/../../../shared/data/sintel-flow"
+        )
+        .into()
+    });
+    let dir = Path::new(&dir).to_path_buf();
     if !dir.exists() {
         println!("{{\"skipped\": \"no sintel-flow data\"}}");
         return;
