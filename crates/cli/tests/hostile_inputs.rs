@@ -11,8 +11,12 @@ use std::process::Command;
 
 /// Run the binary; returns (exit code, stderr).
 fn romosplat(args: &[&str]) -> (i32, String) {
-    let out = Command::new(env!("CARGO_BIN_EXE_romosplat"))
-        .args(args)
+    exit_and_stderr(Command::new(env!("CARGO_BIN_EXE_romosplat")).args(args))
+}
+
+/// Run `cmd` with `--quiet`; returns (exit code, stderr).
+fn exit_and_stderr(cmd: &mut Command) -> (i32, String) {
+    let out = cmd
         .arg("--quiet")
         .env("XDG_RUNTIME_DIR", std::env::temp_dir())
         .output()
@@ -320,6 +324,30 @@ fn toml_errors_are_one_line() {
     );
 }
 
+/// `scenes/rotation.toml` (a camera that only turns) cut to 4 frames of
+/// `w`×`h` without held-out views, generated into `dir/rot`.
+fn short_pan(dir: &Path, w: u32, h: u32) -> PathBuf {
+    let spec = std::fs::read_to_string(
+        Path::new(env!("CARGO_MANIFEST_DIR")).join("../../scenes/rotation.toml"),
+    )
+    .unwrap();
+    let spec = spec
+        .replace("frames = 16", "frames = 4")
+        .replace("width = 320", &format!("width = {w}"))
+        .replace("height = 240", &format!("height = {h}"))
+        .replace("supersample = 3", "supersample = 1")
+        .replace("test_views = 2", "test_views = 0");
+    assert!(spec.contains("frames = 4") && spec.contains("test_views = 0"));
+    std::fs::create_dir_all(dir).unwrap();
+    let toml = dir.join("rotation.toml");
+    std::fs::write(&toml, spec).unwrap();
+    let scene = dir.join("rot");
+    let (code, err) = romosplat(&["scene", "generate", s(&toml), "--out", s(&scene)]);
+    assert_eq!(code, 0, "{err}");
+    std::fs::remove_file(&toml).unwrap();
+    scene
+}
+
 /// A camera that only turns gives COLMAP nothing to triangulate. COLMAP
 /// still builds a model from a few noisy points on this short pan; `pose`
 /// reads the matcher's verdicts from its database and warns that there is
@@ -327,24 +355,8 @@ fn toml_errors_are_one_line() {
 /// fails, the error names "no parallax" as the cause.
 #[test]
 fn pure_rotation_pose_names_no_parallax() {
-    let spec = std::fs::read_to_string(
-        Path::new(env!("CARGO_MANIFEST_DIR")).join("../../scenes/rotation.toml"),
-    )
-    .unwrap();
-    // The same pan, cut to 4 small frames so the test takes seconds.
-    let spec = spec
-        .replace("frames = 16", "frames = 4")
-        .replace("width = 320", "width = 240")
-        .replace("height = 240", "height = 180")
-        .replace("supersample = 3", "supersample = 1")
-        .replace("test_views = 2", "test_views = 0");
-    assert!(spec.contains("frames = 4") && spec.contains("test_views = 0"));
     let dir = tempfile::tempdir().unwrap();
-    let toml = dir.path().join("rotation.toml");
-    std::fs::write(&toml, spec).unwrap();
-    let scene = dir.path().join("rot");
-    let (code, err) = romosplat(&["scene", "generate", s(&toml), "--out", s(&scene)]);
-    assert_eq!(code, 0, "{err}");
+    let scene = short_pan(dir.path(), 240, 180);
     let out = Command::new(env!("CARGO_BIN_EXE_romosplat"))
         .args(["--json", "pose", "--scene", s(&scene), "--no-masks"])
         .env("XDG_RUNTIME_DIR", std::env::temp_dir())
@@ -367,20 +379,14 @@ fn pure_rotation_pose_names_no_parallax() {
 /// file (RLIMIT_FSIZE, SIGXFSZ ignored, so a write returns EFBIG as a full
 /// disk returns ENOSPC); returns (exit code, stderr).
 fn romosplat_file_limit(blocks: u32, args: &[&str]) -> (i32, String) {
-    let out = Command::new("sh")
-        .arg("-c")
-        .arg(format!(
-            "trap '' XFSZ; ulimit -f {blocks}; exec \"$0\" \"$@\""
-        ))
-        .arg(env!("CARGO_BIN_EXE_romosplat"))
-        .args(args)
-        .arg("--quiet")
-        .env("XDG_RUNTIME_DIR", std::env::temp_dir())
-        .output()
-        .unwrap();
-    (
-        out.status.code().unwrap_or(-1),
-        String::from_utf8_lossy(&out.stderr).into_owned(),
+    exit_and_stderr(
+        Command::new("sh")
+            .arg("-c")
+            .arg(format!(
+                "trap '' XFSZ; ulimit -f {blocks}; exec \"$0\" \"$@\""
+            ))
+            .arg(env!("CARGO_BIN_EXE_romosplat"))
+            .args(args),
     )
 }
 
@@ -423,19 +429,8 @@ fn failed_writes_leave_no_partial_output() {
 
     // `mask --out` on a small generated scene with a transforms.json: the
     // masks are written, then the nerfstudio copy of transforms.json fails.
-    let spec = std::fs::read_to_string(
-        Path::new(env!("CARGO_MANIFEST_DIR")).join("../../scenes/rotation.toml"),
-    )
-    .unwrap()
-    .replace("frames = 16", "frames = 4")
-    .replace("test_views = 2", "test_views = 0");
-    let toml = dir.path().join("rot.toml");
-    std::fs::write(&toml, spec).unwrap();
     let parent = dir.path().join("gen");
-    std::fs::create_dir_all(&parent).unwrap();
-    let sc = parent.join("rot");
-    let (code, err) = romosplat(&["scene", "generate", s(&toml), "--out", s(&sc)]);
-    assert_eq!(code, 0, "{err}");
+    let sc = short_pan(&parent, 320, 240);
     // Masks of 320×240 are about 1 KB, transforms.json about 3 KB.
     let (code, err) = romosplat_file_limit(
         4,

@@ -127,15 +127,7 @@ fn onnx_flow_recovers_a_known_translation() {
             .flow(&textured(w, h, 0.0, 0.0), &textured(w, h, dx, dy))
             .unwrap();
         assert_eq!((f.w(), f.h()), (w, h));
-        let (mut su, mut sv, mut n) = (0.0f32, 0.0f32, 0.0f32);
-        for y in 10..h - 10 {
-            for x in 10..w - 10 {
-                su += f.u.data[y * w + x];
-                sv += f.v.data[y * w + x];
-                n += 1.0;
-            }
-        }
-        let (mu, mv) = (su / n, sv / n);
+        let (mu, mv) = mean_flow(&f);
         assert!(
             (mu - dx).abs() < tol_mean && (mv - dy).abs() < tol_mean,
             "{w}x{h}: mean flow ({mu}, {mv}), truth ({dx}, {dy})"
@@ -152,6 +144,7 @@ fn onnx_flow_recovers_a_known_translation() {
     assert_eq!(romo::scene::make_flow(&opts).unwrap().name(), "onnx-flow");
 }
 
+/// Mean flow over the frame less a 10-pixel border.
 fn mean_flow(f: &romo::flow::Flow) -> (f32, f32) {
     let (w, h) = (f.w(), f.h());
     let (mut su, mut sv, mut n) = (0.0f32, 0.0f32, 0.0f32);

@@ -14,6 +14,18 @@ use rand::{Rng, SeedableRng};
 /// Uniforms of one Adam step `t` (1-based) over `splats` rows of `row`
 /// floats, the first `width` of each updated; columns < `head` use
 /// `lr_head`; `sparse` is sparse mode.
+/// The learning rates of these tests: INRIA's, with the position rate given.
+fn rates(means: f32) -> LearningRates {
+    LearningRates {
+        means,
+        sh_dc: 2.5e-3,
+        sh_rest: 1.25e-4,
+        opacity: 0.05,
+        scales: 5e-3,
+        rotations: 1e-3,
+    }
+}
+
 fn adam_uniforms(
     cfg: &AdamConfig,
     t: i32,
@@ -190,14 +202,7 @@ fn gpu_step_matches_cpu_step() {
             }
         })
         .collect();
-    let lr = LearningRates {
-        means: 1.6e-4,
-        sh_dc: 2.5e-3,
-        sh_rest: 1.25e-4,
-        opacity: 0.05,
-        scales: 5e-3,
-        rotations: 1e-3,
-    };
+    let lr = rates(1.6e-4);
     for ssim_weight in [0.0f32, 0.2] {
         let input = StepInput {
             camera: &cam,
@@ -285,14 +290,7 @@ fn reused_buffers_give_the_same_step() {
     if ctx().is_none() {
         return;
     }
-    let lr = LearningRates {
-        means: 1.6e-4,
-        sh_dc: 2.5e-3,
-        sh_rest: 1.25e-4,
-        opacity: 0.05,
-        scales: 5e-3,
-        rotations: 1e-3,
-    };
+    let lr = rates(1.6e-4);
     let render = RenderOptions {
         background: [0.2, 0.1, 0.0],
         sh_degree: 1,
@@ -382,14 +380,7 @@ fn sparse_adam_backend_leaves_invisible_splats() {
         target: &target,
         mask: None,
         view_id: None,
-        lr: LearningRates {
-            means: 1e-3,
-            sh_dc: 2.5e-3,
-            sh_rest: 1.25e-4,
-            opacity: 0.05,
-            scales: 5e-3,
-            rotations: 1e-3,
-        },
+        lr: rates(1e-3),
         loss: LossConfig { ssim_weight: 0.0 },
         render: RenderOptions {
             sh_degree: 1,
@@ -444,14 +435,7 @@ fn adam_skips_untrained_sh_only_when_its_moments_are_zero() {
         target: &target,
         mask: None,
         view_id: None,
-        lr: LearningRates {
-            means: 1e-3,
-            sh_dc: 2.5e-3,
-            sh_rest: 1.25e-4,
-            opacity: 0.05,
-            scales: 5e-3,
-            rotations: 1e-3,
-        },
+        lr: rates(1e-3),
         loss: LossConfig { ssim_weight: 0.0 },
         render: RenderOptions::default(), // SH degree 0
     };
