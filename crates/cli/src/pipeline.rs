@@ -35,6 +35,9 @@ pub enum Stage {
     Pose,
     /// Masked splat training.
     Train,
+    /// The same training without masks, on the same poses and steps: the
+    /// held-out scores the masks are compared with.
+    Baseline,
     /// Cleaned export.
     Export,
     /// HTML report.
@@ -50,6 +53,7 @@ impl Stage {
             Stage::Keyframes => "keyframes",
             Stage::Pose => "pose",
             Stage::Train => "train",
+            Stage::Baseline => "baseline",
             Stage::Export => "export",
             Stage::Report => "report",
         }

@@ -15,9 +15,11 @@
 //!    medium / low, then smaller) whose estimate fits [`POSE_SHARE`] of the
 //!    budget; if even the smallest does not, a frame stride;
 //! 3. training gets what is left after masks, COLMAP and a reserve for
-//!    evaluation / export / report: the finest downscale at which
-//!    [`TARGET_STEPS`] fit, capped at [`MAX_STEPS`]; below that, the coarsest
-//!    allowed downscale with the steps that fit.
+//!    evaluation / export / report, shared equally by the models it trains
+//!    (the masked one and, by default, the unmasked baseline at the same
+//!    steps): the finest downscale at which [`TARGET_STEPS`] fit, capped at
+//!    [`MAX_STEPS`]; below that, the coarsest allowed downscale with the
+//!    steps that fit.
 //!
 //! Explicit `--steps`, `--downscale`, `--pose-stride`, `--pose-features` and
 //! `--pose-max-image-size` are kept as given (the plan may then exceed the
@@ -178,6 +180,9 @@ pub struct Input {
     pub height: u32,
     /// Sequential matching overlap that will be used.
     pub overlap: u32,
+    /// Models trained at the planned resolution and steps: 2 with the
+    /// unmasked baseline, else 1.
+    pub trainings: usize,
 }
 
 /// Values the user set; `None` = plan it.
@@ -202,7 +207,10 @@ pub struct Plan {
     pub train_width: u32,
     pub train_height: u32,
     pub steps: usize,
-    /// Estimated seconds per stage: mask, pose, train, finish.
+    /// Models trained with those steps (2: masked and the unmasked baseline).
+    #[serde(default = "one")]
+    pub trainings: usize,
+    /// Estimated seconds per stage: mask, pose, train (all models), finish.
     pub mask_s: f64,
     pub pose_s: f64,
     pub train_s: f64,
@@ -215,6 +223,10 @@ pub struct Plan {
 
 fn yes() -> bool {
     true
+}
+
+fn one() -> usize {
+    1
 }
 
 impl Plan {
@@ -237,11 +249,16 @@ impl Plan {
                 m(self.pose_s)
             ),
             format!(
-                "training: {}×{} (downscale {}), {} steps, {}",
+                "training: {}×{} (downscale {}), {} steps{}, {}",
                 self.train_width,
                 self.train_height,
                 self.downscale,
                 self.steps,
+                if self.trainings > 1 {
+                    " each, masked and an unmasked baseline"
+                } else {
+                    ""
+                },
                 if self.train_estimated {
                     m(self.train_s)
                 } else {
@@ -340,9 +357,10 @@ pub fn plan(input: &Input, rates: &Rates, budget_s: f64, fixed: &Fixed) -> Plan 
         Some(d) => vec![d],
         None => (1..=max_d).collect(),
     };
+    let trainings = input.trainings.max(1);
     let fit = |d: u32| {
         let t = train_step(rates, scaled(input.width, d), scaled(input.height, d));
-        (left / t).floor() as usize
+        (left / (t * trainings as f64)).floor() as usize
     };
     let (downscale, steps) = match fixed.steps {
         Some(steps) => {
@@ -382,9 +400,10 @@ pub fn plan(input: &Input, rates: &Rates, budget_s: f64, fixed: &Fixed) -> Plan 
         train_width: tw,
         train_height: th,
         steps,
+        trainings,
         mask_s,
         pose_s,
-        train_s: steps as f64 * train_step(rates, tw, th),
+        train_s: (steps * trainings) as f64 * train_step(rates, tw, th),
         finish_s,
         train_estimated: true,
     }
@@ -511,6 +530,7 @@ mod tests {
             width: 854,
             height: 480,
             overlap: 10,
+            trainings: 2,
         }
     }
 
@@ -528,6 +548,38 @@ mod tests {
             assert!(p.steps >= MIN_STEPS);
             assert!(p.pose_s <= POSE_SHARE * b + 1e-9, "{p:?}");
         }
+    }
+
+    #[test]
+    fn the_baseline_shares_the_training_time() {
+        let one = Input {
+            trainings: 1,
+            ..video()
+        };
+        let alone = plan(&one, &rates(), 1200.0, &Fixed::default());
+        let both = plan(&video(), &rates(), 1200.0, &Fixed::default());
+        assert!(both.total_s() <= 1200.0, "{:?}", both.lines());
+        // The same per-step time for both models, half the step budget each.
+        let work = |p: &Plan| p.steps as f64 * train_step(&rates(), p.train_width, p.train_height);
+        assert!(
+            work(&both) <= work(&alone) / 2.0 + 1e-9,
+            "{alone:?} {both:?}"
+        );
+        assert!((both.train_s - 2.0 * work(&both)).abs() < 1e-6);
+        // Set steps and size: the estimate doubles.
+        let f = Fixed {
+            steps: Some(1000),
+            downscale: Some(4),
+            ..Fixed::default()
+        };
+        let (a, b) = (
+            plan(&one, &rates(), 1200.0, &f),
+            plan(&video(), &rates(), 1200.0, &f),
+        );
+        assert_eq!((a.steps, b.steps), (1000, 1000));
+        assert!((b.train_s - 2.0 * a.train_s).abs() < 1e-6);
+        assert!(both.lines()[2].contains("each, masked and an unmasked baseline"));
+        assert!(!alone.lines()[2].contains("baseline"));
     }
 
     #[test]

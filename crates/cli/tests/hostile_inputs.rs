@@ -425,6 +425,9 @@ fn failed_writes_leave_no_partial_output() {
     assert_eq!(code, 1, "{err}");
     assert_eq!(err.trim_end().lines().count(), 1, "{err}");
     assert!(err.contains("File too large"), "{err}");
+    // The file is named where the user asked for it, not in the hidden
+    // staging folder.
+    assert!(err.contains(s(&out)) && !err.contains(".stage."), "{err}");
     assert_eq!(entries(&root), before, "{err}");
 
     // `mask --out` on a small generated scene with a transforms.json: the
@@ -439,6 +442,11 @@ fn failed_writes_leave_no_partial_output() {
     assert_eq!(code, 1, "{err}");
     assert_eq!(err.trim_end().lines().count(), 1, "{err}");
     assert!(err.contains("transforms.json"), "{err}");
+    assert!(
+        err.contains(&format!("{}/transforms.json", s(&parent.join("m")))),
+        "{err}"
+    );
+    assert!(!err.contains(".stage."), "{err}");
     assert_eq!(entries(&parent), vec!["rot".to_string()], "{err}");
     // With room, the same command writes masks and the copy.
     let (code, err) = romosplat(&["mask", "--scene", s(&sc), "--out", s(&parent.join("m"))]);

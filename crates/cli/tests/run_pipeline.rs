@@ -134,6 +134,7 @@ fn run_video_end_to_end_without_a_split() {
             "keyframes",
             "pose",
             "train",
+            "baseline",
             "export",
             "report"
         ]
@@ -173,8 +174,17 @@ fn run_video_end_to_end_without_a_split() {
     for f in ["splats_clean.ply", "report.html", "manifests/report.json"] {
         assert!(out.join(f).is_file(), "{f} missing");
     }
+    // The unmasked baseline: same poses, steps and held-out views, no masks.
+    let base = &first["baseline"];
+    assert_eq!(base["options"]["steps"], 30);
+    assert_eq!(base["options"]["use_masks"], false);
+    assert_eq!(first["train"]["options"]["use_masks"], true);
+    assert_eq!(base["masked_views"], 0);
+    assert_eq!(base["test"]["views"].as_array().unwrap().len(), views.len());
+    assert!(base["test"]["mean_psnr"].as_f64().unwrap().is_finite());
     let html = std::fs::read_to_string(out.join("report.html")).unwrap();
     assert!(html.contains("COLMAP") && html.contains("Held-out") && html.contains("Plan for the"));
+    assert!(html.contains("RoMo masks") && html.contains("no masks (baseline)"));
 
     // Touching the video and the options file without changing them reruns
     // nothing (they are hashed); the recorded results come back from the
@@ -221,6 +231,10 @@ fn run_scene_without_a_split_reruns_what_changed() {
     assert_eq!(ran(&first), all);
     assert_eq!(first["stages"]["pose"]["status"], "kept the scene's poses");
     assert_eq!(first["stages"]["mask"]["status"], "skipped (--no-masks)");
+    assert_eq!(
+        first["stages"]["baseline"]["status"],
+        "skipped (--no-masks: the model is the baseline)"
+    );
     assert_eq!(first["train"]["test"]["views"].as_array().unwrap().len(), 2);
     assert_eq!(first["train"]["train_views"], 10);
     // The user's folder is never written to.

@@ -111,6 +111,12 @@ impl Staging {
         &self.dest
     }
 
+    /// `text` (an error message) with the hidden staging folder named as
+    /// the destination it stands for: what a user should read.
+    pub fn public(&self, text: &str) -> String {
+        text.replace(&*self.stage.to_string_lossy(), &self.dest.to_string_lossy())
+    }
+
     /// Move everything staged into the destination.
     pub fn commit(mut self) -> Result<PathBuf> {
         if !self.dest.exists() {
@@ -275,6 +281,23 @@ pub fn write_png_rgb32f(path: impl AsRef<Path>, img: &Rgb32FImage) -> Result<()>
 mod tests {
     #![allow(clippy::unwrap_used, clippy::expect_used)]
     use super::*;
+
+    #[test]
+    fn errors_name_the_destination_not_the_staging_folder() {
+        let dir = tempfile::tempdir().unwrap();
+        let dest = dir.path().join("masks");
+        let st = Staging::new(&dest).unwrap();
+        let e = LoaderError::io(
+            st.path().join("a.png"),
+            std::io::Error::other("No space left on device"),
+        );
+        let text = st.public(&e.to_string());
+        assert_eq!(
+            text,
+            format!("{}: No space left on device", dest.join("a.png").display())
+        );
+        assert!(!text.contains(".stage."));
+    }
 
     /// A stage that fails leaves nothing behind; one that succeeds appears
     /// whole, merging into an existing folder without touching other files.

@@ -218,17 +218,22 @@ fn segment_with_copy(
         scene_dir.display()
     ));
     let pb = ctx.progress(scene.frames.len() as u64, "mask");
-    let report = romo::segment_scene(&scene, &opts, &|stage, done, total| {
-        pb.set_message(stage.to_string());
-        pb.set_length(total as u64);
-        pb.set_position(done as u64);
-    })?;
-    pb.finish_and_clear();
-    let copy = if nerfstudio_copy {
-        write_transforms_copy(scene_dir, &out, stage.path())?
-    } else {
-        None
-    };
+    // Errors name the output folder, not the hidden staging folder.
+    let staged = (|| -> anyhow::Result<_> {
+        let report = romo::segment_scene(&scene, &opts, &|stage, done, total| {
+            pb.set_message(stage.to_string());
+            pb.set_length(total as u64);
+            pb.set_position(done as u64);
+        })?;
+        pb.finish_and_clear();
+        let copy = if nerfstudio_copy {
+            write_transforms_copy(scene_dir, &out, stage.path())?
+        } else {
+            None
+        };
+        Ok((report, copy))
+    })();
+    let (report, copy) = staged.map_err(|e| anyhow::anyhow!(stage.public(&format!("{e:#}"))))?;
     stage.commit()?;
     let mut report = report;
     report.masks_dir = Some(out.join("masks"));

@@ -30,6 +30,10 @@ pub struct Args {
     /// Training downscale (planned when not given).
     #[arg(long)]
     pub downscale: Option<u32>,
+    /// Plan one training, as `run --no-baseline` or `run --no-masks` do
+    /// (default: the masked model and the unmasked baseline share the time).
+    #[arg(long)]
+    pub no_baseline: bool,
     /// Training backend the probe runs on.
     #[arg(long, value_enum, default_value_t = BackendKind::Auto)]
     pub backend: BackendKind,
@@ -91,6 +95,7 @@ pub fn run(args: &Args, ctx: &Ctx) -> anyhow::Result<serde_json::Value> {
         width: w,
         height: h,
         overlap: colmap.overlap,
+        trainings: if args.no_baseline { 1 } else { 2 },
     };
     let p = plan_for(&input, args.budget_minutes, &fixed, args.backend, ctx)?;
     ctx.info(format!("plan for {frames} frames of {w}×{h}:"));

@@ -62,6 +62,11 @@ pub struct Args {
     /// Do not use masks anywhere (COLMAP and training): the unmasked baseline.
     #[arg(long)]
     pub no_masks: bool,
+    /// Do not train the unmasked baseline (by default a second model is
+    /// trained without masks on the same poses and steps, and the report
+    /// compares their held-out scores; the budget is shared by both).
+    #[arg(long)]
+    pub no_baseline: bool,
     /// Wall-time budget for the whole run, minutes: plans the training
     /// resolution and steps and COLMAP's image size, features and frame
     /// stride that are not given explicitly (see `romosplat plan`).
@@ -108,6 +113,8 @@ pub struct Plan {
     pub ffmpeg: PathBuf,
     pub keep_poses: bool,
     pub no_masks: bool,
+    /// Also train without masks (on the same poses and steps) to compare.
+    pub baseline: bool,
     pub romo: romo::RomoOptions,
     /// The `--mask-options` file (a hashed input of the mask stage).
     pub mask_options: Option<PathBuf>,
@@ -173,6 +180,7 @@ impl Plan {
             ffmpeg: args.ffmpeg.clone(),
             keep_poses: args.keep_poses,
             no_masks: args.no_masks,
+            baseline: trainings(args) > 1,
             romo,
             mask_options: args.mask_options.clone(),
             keyframes: (video && !args.all_frames).then(KeyframeOptions::default),
@@ -186,6 +194,14 @@ impl Plan {
             from: args.from,
             budget: budget.clone(),
         })
+    }
+
+    /// The baseline's training options: the masked model's without masks.
+    pub fn baseline_options(&self) -> splat::train::TrainOptions {
+        splat::train::TrainOptions {
+            use_masks: false,
+            ..self.train.clone()
+        }
     }
 
     /// The folder COLMAP and training read: the keyframes when selected, else the scene.
@@ -216,6 +232,10 @@ impl Plan {
     }
     pub fn splats(&self) -> PathBuf {
         self.train_dir().join("splats.ply")
+    }
+    /// `OUT/baseline`: the model trained without masks.
+    pub fn baseline_dir(&self) -> PathBuf {
+        self.out.join("baseline")
     }
     pub fn export_path(&self) -> PathBuf {
         let ext = self.format.name();
@@ -284,6 +304,8 @@ pub struct Results {
     pub keyframes: Option<KeyframesOutcome>,
     pub pose: Option<pose::ColmapReport>,
     pub train: Option<TrainOutcome>,
+    /// The same training without masks.
+    pub baseline: Option<TrainOutcome>,
     pub export: Option<ExportOutcome>,
     /// (stage, seconds) of every stage that has run, now or before.
     pub timings: Vec<(String, f64)>,
@@ -305,7 +327,7 @@ pub struct StageDef {
 }
 
 /// The stages, in order.
-pub fn stages() -> [StageDef; 7] {
+pub fn stages() -> [StageDef; 8] {
     [
         StageDef {
             stage: Stage::Frames,
@@ -410,49 +432,42 @@ pub fn stages() -> [StageDef; 7] {
         StageDef {
             stage: Stage::Train,
             skip: |_| None,
-            inputs: |p| {
-                let t = p.train_scene();
-                let mut v = vec![
-                    Input::Stat(t.join("images")),
-                    Input::Stat(t.join("sparse/0")),
-                    Input::Hashed(t.join("split.json")),
-                    Input::Hashed(t.join("transforms.json")),
-                ];
-                if !p.no_masks {
-                    v.push(Input::Stat(t.join("masks")));
-                }
-                v
-            },
+            inputs: |p| train_inputs(p, !p.no_masks),
             outputs: |p| vec![p.splats()],
-            options: |p| {
-                Ok(json!({
-                    "train": p.train,
-                    "downscale": p.downscale,
-                    "holdout_every": p.holdout_every,
-                    "backend": format!("{:?}", p.backend),
-                }))
-            },
+            options: |p| train_options(p, &p.train),
             run: |p, r, ctx| {
-                clear(&p.train_dir())?;
-                let job = TrainJob {
-                    scene: p.train_scene(),
-                    poses: None,
-                    downscale: p.downscale,
-                    holdout_every: p.holdout_every,
-                    backend: p.backend,
-                    sparse_adam: false,
-                    resume: None,
-                    out: p.train_dir(),
-                    test_renders: Some(p.train_dir().join("renders")),
-                    opts: p.train.clone(),
-                };
-                let o = super::train::train(&job, ctx)?;
+                let o = train_into(p, p.train.clone(), &p.train_dir(), ctx)?;
                 let v = serde_json::to_value(&o)?;
                 r.train = Some(o);
                 Ok(v)
             },
             restore: |r, v| {
                 r.train = Some(serde_json::from_value(v)?);
+                Ok(())
+            },
+        },
+        StageDef {
+            stage: Stage::Baseline,
+            skip: |p| {
+                if p.no_masks {
+                    Some("skipped (--no-masks: the model is the baseline)")
+                } else if !p.baseline {
+                    Some("skipped (--no-baseline)")
+                } else {
+                    None
+                }
+            },
+            inputs: |p| train_inputs(p, false),
+            outputs: |p| vec![p.baseline_dir().join("splats.ply")],
+            options: |p| train_options(p, &p.baseline_options()),
+            run: |p, r, ctx| {
+                let o = train_into(p, p.baseline_options(), &p.baseline_dir(), ctx)?;
+                let v = serde_json::to_value(&o)?;
+                r.baseline = Some(o);
+                Ok(v)
+            },
+            restore: |r, v| {
+                r.baseline = Some(serde_json::from_value(v)?);
                 Ok(())
             },
         },
@@ -484,7 +499,13 @@ pub fn stages() -> [StageDef; 7] {
         StageDef {
             stage: Stage::Report,
             skip: |_| None,
-            inputs: |p| vec![Input::Stat(p.splats()), Input::Stat(p.export_path())],
+            inputs: |p| {
+                let mut v = vec![Input::Stat(p.splats()), Input::Stat(p.export_path())];
+                if p.baseline && !p.no_masks {
+                    v.push(Input::Stat(p.baseline_dir().join("splats.ply")));
+                }
+                v
+            },
             outputs: |p| vec![p.report_path()],
             options: |_| Ok(serde_json::Value::Null),
             run: |p, r, _| {
@@ -494,6 +515,55 @@ pub fn stages() -> [StageDef; 7] {
             restore: |_, _| Ok(()),
         },
     ]
+}
+
+/// What a training stage reads: the posed (undistorted) scene, and the
+/// masks when it uses them.
+fn train_inputs(p: &Plan, masks: bool) -> Vec<Input> {
+    let t = p.train_scene();
+    let mut v = vec![
+        Input::Stat(t.join("images")),
+        Input::Stat(t.join("sparse/0")),
+        Input::Hashed(t.join("split.json")),
+        Input::Hashed(t.join("transforms.json")),
+    ];
+    if masks {
+        v.push(Input::Stat(t.join("masks")));
+    }
+    v
+}
+
+/// The options a training stage's result depends on.
+fn train_options(p: &Plan, train: &splat::train::TrainOptions) -> Result<serde_json::Value> {
+    Ok(json!({
+        "train": train,
+        "downscale": p.downscale,
+        "holdout_every": p.holdout_every,
+        "backend": format!("{:?}", p.backend),
+    }))
+}
+
+/// Train on the posed scene into a fresh `dir` (held-out renders in `dir/renders`).
+fn train_into(
+    p: &Plan,
+    opts: splat::train::TrainOptions,
+    dir: &Path,
+    ctx: &Ctx,
+) -> Result<TrainOutcome> {
+    clear(dir)?;
+    let job = TrainJob {
+        scene: p.train_scene(),
+        poses: None,
+        downscale: p.downscale,
+        holdout_every: p.holdout_every,
+        backend: p.backend,
+        sparse_adam: false,
+        resume: None,
+        out: dir.to_path_buf(),
+        test_renders: Some(dir.join("renders")),
+        opts,
+    };
+    super::train::train(&job, ctx)
 }
 
 /// Remove a folder or file we own (stale outputs of an earlier run).
@@ -602,6 +672,7 @@ fn budget(args: &Args, ctx: &Ctx) -> Result<Budget> {
             .pose
             .pose_overlap
             .unwrap_or(pose::ColmapOptions::default().overlap),
+        trainings: trainings(args),
     };
     let fixed = crate::plan::Fixed {
         steps: args.steps.map(|s| s as usize),
@@ -642,6 +713,16 @@ fn budget(args: &Args, ctx: &Ctx) -> Result<Budget> {
         ctx.info(format!("  {l}"));
     }
     Ok(budget)
+}
+
+/// Models the run trains: the masked one, and the unmasked baseline unless
+/// `--no-baseline` (or `--no-masks`, where the model is the baseline).
+fn trainings(args: &Args) -> usize {
+    if args.no_masks || args.no_baseline {
+        1
+    } else {
+        2
+    }
 }
 
 /// `OUT/plan.json`: a plan and what it was made from.
@@ -699,6 +780,7 @@ pub fn run(args: &Args, ctx: &Ctx) -> Result<serde_json::Value> {
     summary.insert("plan".into(), json!(plan.budget));
     summary.insert("pose".into(), json!(results.pose));
     summary.insert("train".into(), json!(results.train));
+    summary.insert("baseline".into(), json!(results.baseline));
     summary.insert("export".into(), json!(results.export));
     summary.insert("splats".into(), json!(plan.splats()));
     summary.insert("export_path".into(), json!(plan.export_path()));

@@ -3,6 +3,7 @@
 //! their masks and held-out renders.
 
 use super::run::{Plan, Results, Source};
+use super::train::TrainOutcome;
 use super::train_common::VariantResult;
 use crate::report::{self, Chart, Figure, Report, Series, Table};
 use anyhow::{Context, Result};
@@ -79,48 +80,7 @@ pub fn write_report(plan: &Plan, r: &Results) -> Result<()> {
         });
     }
     if let Some(t) = &r.train {
-        let v = VariantResult::new(t.clone(), 0.0);
-        rep.tables.push(Table {
-            caption: format!(
-                "Held-out views ({})",
-                t.test.as_ref().map_or(0, |e| e.views.len())
-            ),
-            header: vec![
-                "PSNR".into(),
-                "SSIM".into(),
-                "LPIPS".into(),
-                "splats".into(),
-            ],
-            rows: vec![vec![
-                format!("{:.2}", v.psnr),
-                format!("{:.4}", v.ssim),
-                v.lpips.map_or("-".into(), |l| format!("{l:.4}")),
-                v.splats.to_string(),
-            ]],
-        });
-        for (title, y, points) in [
-            ("training loss", "loss", v.loss_curve.clone()),
-            ("training PSNR", "dB", v.psnr_curve.clone()),
-        ] {
-            rep.charts.push(Chart {
-                title: title.into(),
-                x_label: "step".into(),
-                y_label: y.into(),
-                series: vec![Series {
-                    name: title.into(),
-                    points,
-                }],
-            });
-        }
-        for p in v.renders.iter().take(4) {
-            let img = image::open(p)
-                .with_context(|| format!("{}: cannot read", p.display()))?
-                .to_rgb8();
-            rep.renders.push(vec![Figure {
-                caption: p.display().to_string(),
-                png: report::png_rgb8(&report::thumbnail(&img, 320))?,
-            }]);
-        }
+        held_out(&mut rep, plan, t, r.baseline.as_ref())?;
     }
     let images = plan.images();
     let names = loader::scene::list_images(&images)?;
@@ -140,6 +100,81 @@ pub fn write_report(plan: &Plan, r: &Results) -> Result<()> {
     }
     rep.write(&plan.report_path())
 }
+
+/// Held-out scores of the model (and of the unmasked baseline when it was
+/// trained), training curves, and held-out renders side by side.
+fn held_out(
+    rep: &mut Report,
+    plan: &Plan,
+    t: &TrainOutcome,
+    baseline: Option<&TrainOutcome>,
+) -> Result<()> {
+    let main_name = if plan.no_masks {
+        "no masks"
+    } else {
+        "RoMo masks"
+    };
+    let mut models = vec![(main_name, VariantResult::new(t.clone(), 0.0))];
+    if let Some(b) = baseline {
+        models.push(("no masks (baseline)", VariantResult::new(b.clone(), 0.0)));
+    }
+    rep.tables.push(Table {
+        caption: format!(
+            "Held-out views ({}), {} steps each",
+            t.test.as_ref().map_or(0, |e| e.views.len()),
+            t.options.steps
+        ),
+        header: ["training", "PSNR", "SSIM", "LPIPS", "splats"]
+            .map(String::from)
+            .to_vec(),
+        rows: models
+            .iter()
+            .map(|(name, v)| {
+                vec![
+                    (*name).into(),
+                    format!("{:.2}", v.psnr),
+                    format!("{:.4}", v.ssim),
+                    v.lpips.map_or("-".into(), |l| format!("{l:.4}")),
+                    v.splats.to_string(),
+                ]
+            })
+            .collect(),
+    });
+    for (title, y, curve) in [
+        ("training loss", "loss", (|v| v.loss_curve.clone()) as Curve),
+        ("training PSNR", "dB", |v| v.psnr_curve.clone()),
+    ] {
+        rep.charts.push(Chart {
+            title: title.into(),
+            x_label: "step".into(),
+            y_label: y.into(),
+            series: models
+                .iter()
+                .map(|(name, v)| Series {
+                    name: (*name).into(),
+                    points: curve(v),
+                })
+                .collect(),
+        });
+    }
+    for i in 0..models[0].1.renders.len().min(4) {
+        let mut row = Vec::new();
+        for (name, v) in &models {
+            let Some(p) = v.renders.get(i) else { continue };
+            let img = image::open(p)
+                .with_context(|| format!("{}: cannot read", p.display()))?
+                .to_rgb8();
+            row.push(Figure {
+                caption: format!("{name}: {}", p.display()),
+                png: report::png_rgb8(&report::thumbnail(&img, 320))?,
+            });
+        }
+        rep.renders.push(row);
+    }
+    Ok(())
+}
+
+type Curve = fn(&VariantResult) -> Vec<(f64, f64)>;
 
 /// The training image size: the first frame's, downscaled.
 fn train_resolution(plan: &Plan) -> Option<(u32, u32)> {

@@ -374,102 +374,108 @@ pub fn train(job: &TrainJob, ctx: &Ctx) -> anyhow::Result<TrainOutcome> {
     // Outputs (checkpoints, splats.ply, summary.json) are staged and moved
     // into --out together at the end: a failed run leaves --out untouched.
     let stage = loader::io::Staging::new(&job.out)?;
-    let mut backend = make_train_backend(job.backend, job.sparse_adam, ctx)?;
-    let pb = ctx.progress(opts.steps as u64, "train");
-    pb.set_position(start.step as u64);
-    pb.reset_rate();
-    let mut trainer = Trainer {
-        backend: backend.as_mut(),
-        data: &data,
-        opts: opts.clone(),
-        checkpoint_dir: Some(stage.path().to_path_buf()),
-    };
-    let every = (opts.steps / 100).max(1);
-    let mut history: Vec<HistoryPoint> = Vec::new();
-    let (end, rep) = trainer.run(start, &mut |p| {
-        if p.step.is_multiple_of(every) || p.step == p.steps {
-            history.push(HistoryPoint {
-                step: p.step,
-                loss: p.loss,
-                psnr: p.psnr,
-                splats: p.splats,
-            });
-        }
-        pb.set_position(p.step as u64);
-        if p.step.is_multiple_of(10) || p.step == p.steps {
-            pb.set_message(format!(
-                "loss {:.4} psnr {:.2} splats {}",
-                p.loss, p.psnr, p.splats
-            ));
-        }
-    })?;
-    pb.finish_and_clear();
-    let ply = job.out.join("splats.ply");
-    write_ply(stage.path().join("splats.ply"), &end.splats)?;
-    ctx.info(format!(
-        "trained {} steps in {:.1} s ({:.2} steps/s), {} splats, train PSNR {:.2} → {}",
-        rep.steps - rep.start_step,
-        rep.seconds,
-        rep.steps_per_sec,
-        rep.splats,
-        rep.final_train_psnr,
-        ply.display()
-    ));
-    let mut test = None;
-    let mut test_renders = Vec::new();
-    let mut test_lpips = None;
-    if !test_idx.is_empty() {
-        let tviews = load_views(&scene, &test_idx, false)?;
-        let ropts = RenderOptions {
-            background: opts.background,
-            sh_degree: end.splats.sh_degree,
-            low_pass: opts.low_pass,
-            antialiased: opts.antialiased,
+    // Errors name the output folder, not the hidden staging folder.
+    let staged = (|| -> anyhow::Result<TrainOutcome> {
+        let mut backend = make_train_backend(job.backend, job.sparse_adam, ctx)?;
+        let pb = ctx.progress(opts.steps as u64, "train");
+        pb.set_position(start.step as u64);
+        pb.reset_rate();
+        let mut trainer = Trainer {
+            backend: backend.as_mut(),
+            data: &data,
+            opts: opts.clone(),
+            checkpoint_dir: Some(stage.path().to_path_buf()),
         };
-        let (ev, images) = evaluate(backend.as_mut(), &end.splats, &tviews, &ropts)?;
-        ctx.info(format!(
-            "test views: PSNR {:.2} dB, SSIM {:.4} ({} views)",
-            ev.mean_psnr,
-            ev.mean_ssim,
-            ev.views.len()
-        ));
-        if let Some(mut net) = super::eval_views::builtin_lpips()? {
-            let l = net.score_views(&tviews, &images)?;
-            let mean = super::eval_views::mean_std(&l).0;
-            ctx.info(format!("test views: LPIPS {mean:.4}"));
-            test_lpips = Some(mean);
-        }
-        if let Some(dir) = &job.test_renders {
-            std::fs::create_dir_all(dir).with_context(|| format!("creating {}", dir.display()))?;
-            for (v, img) in tviews.iter().zip(images) {
-                let path = dir.join(format!("{}.png", super::render::stem(&v.name)));
-                let img = image::Rgb32FImage::from_raw(v.camera.width, v.camera.height, img)
-                    .ok_or_else(|| anyhow::anyhow!("{}: render size mismatch", v.name))?;
-                loader::io::write_png_rgb32f(&path, &img)?;
-                test_renders.push(path);
+        let every = (opts.steps / 100).max(1);
+        let mut history: Vec<HistoryPoint> = Vec::new();
+        let (end, rep) = trainer.run(start, &mut |p| {
+            if p.step.is_multiple_of(every) || p.step == p.steps {
+                history.push(HistoryPoint {
+                    step: p.step,
+                    loss: p.loss,
+                    psnr: p.psnr,
+                    splats: p.splats,
+                });
             }
+            pb.set_position(p.step as u64);
+            if p.step.is_multiple_of(10) || p.step == p.steps {
+                pb.set_message(format!(
+                    "loss {:.4} psnr {:.2} splats {}",
+                    p.loss, p.psnr, p.splats
+                ));
+            }
+        })?;
+        pb.finish_and_clear();
+        let ply = job.out.join("splats.ply");
+        write_ply(stage.path().join("splats.ply"), &end.splats)?;
+        ctx.info(format!(
+            "trained {} steps in {:.1} s ({:.2} steps/s), {} splats, train PSNR {:.2} → {}",
+            rep.steps - rep.start_step,
+            rep.seconds,
+            rep.steps_per_sec,
+            rep.splats,
+            rep.final_train_psnr,
+            ply.display()
+        ));
+        let mut test = None;
+        let mut test_renders = Vec::new();
+        let mut test_lpips = None;
+        if !test_idx.is_empty() {
+            let tviews = load_views(&scene, &test_idx, false)?;
+            let ropts = RenderOptions {
+                background: opts.background,
+                sh_degree: end.splats.sh_degree,
+                low_pass: opts.low_pass,
+                antialiased: opts.antialiased,
+            };
+            let (ev, images) = evaluate(backend.as_mut(), &end.splats, &tviews, &ropts)?;
+            ctx.info(format!(
+                "test views: PSNR {:.2} dB, SSIM {:.4} ({} views)",
+                ev.mean_psnr,
+                ev.mean_ssim,
+                ev.views.len()
+            ));
+            if let Some(mut net) = super::eval_views::builtin_lpips()? {
+                let l = net.score_views(&tviews, &images)?;
+                let mean = super::eval_views::mean_std(&l).0;
+                ctx.info(format!("test views: LPIPS {mean:.4}"));
+                test_lpips = Some(mean);
+            }
+            if let Some(dir) = &job.test_renders {
+                std::fs::create_dir_all(dir)
+                    .with_context(|| format!("creating {}", dir.display()))?;
+                for (v, img) in tviews.iter().zip(images) {
+                    let path = dir.join(format!("{}.png", super::render::stem(&v.name)));
+                    let img = image::Rgb32FImage::from_raw(v.camera.width, v.camera.height, img)
+                        .ok_or_else(|| anyhow::anyhow!("{}: render size mismatch", v.name))?;
+                    loader::io::write_png_rgb32f(&path, &img)?;
+                    test_renders.push(path);
+                }
+            }
+            test = Some(ev);
         }
-        test = Some(ev);
-    }
-    let outcome = TrainOutcome {
-        splats_ply: ply,
-        checkpoint: job.out.join("checkpoint.bin"),
-        backend: rep.backend.clone(),
-        train_views: train_idx.len(),
-        masked_views: masked,
-        extent,
-        init,
-        report: rep,
-        test,
-        test_renders,
-        test_lpips,
-        history,
-        options: opts,
-    };
-    loader::io::write_bytes_atomic(
-        stage.path().join("summary.json"),
-        serde_json::to_string_pretty(&outcome)?.as_bytes(),
-    )?;
+        let outcome = TrainOutcome {
+            splats_ply: ply,
+            checkpoint: job.out.join("checkpoint.bin"),
+            backend: rep.backend.clone(),
+            train_views: train_idx.len(),
+            masked_views: masked,
+            extent,
+            init,
+            report: rep,
+            test,
+            test_renders,
+            test_lpips,
+            history,
+            options: opts,
+        };
+        loader::io::write_bytes_atomic(
+            stage.path().join("summary.json"),
+            serde_json::to_string_pretty(&outcome)?.as_bytes(),
+        )?;
+        Ok(outcome)
+    })();
+    let outcome = staged.map_err(|e| anyhow::anyhow!(stage.public(&format!("{e:#}"))))?;
     stage.commit()?;
     Ok(outcome)
 }
