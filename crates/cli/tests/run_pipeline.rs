@@ -182,9 +182,15 @@ fn run_video_end_to_end_without_a_split() {
     assert_eq!(base["masked_views"], 0);
     assert_eq!(base["test"]["views"].as_array().unwrap().len(), views.len());
     assert!(base["test"]["mean_psnr"].as_f64().unwrap().is_finite());
+    // Both are also scored on the held-out frames' static pixels (RoMo's masks).
+    for o in [&first["train"], base] {
+        assert_eq!(o["test_static"]["masked_views"], views.len());
+        assert!(o["test_static"]["mean_psnr"].as_f64().unwrap().is_finite());
+    }
     let html = std::fs::read_to_string(out.join("report.html")).unwrap();
     assert!(html.contains("COLMAP") && html.contains("Held-out") && html.contains("Plan for the"));
     assert!(html.contains("RoMo masks") && html.contains("no masks (baseline)"));
+    assert!(html.contains("static PSNR"));
 
     // Touching the video and the options file without changing them reruns
     // nothing (they are hashed); the recorded results come back from the

@@ -905,6 +905,29 @@ fn print_summary(ctx: &Ctx, plan: &Plan, rows: &[StageRow], results: &Results, t
                 .map_or(String::new(), |l| format!(", LPIPS {l:.4}")),
             t.views.len()
         ));
+        for (name, o) in [("masks", &results.train), ("no masks", &results.baseline)] {
+            if let Some(st) = o.as_ref().and_then(|o| o.test_static.as_ref()) {
+                ctx.info(format!(
+                    "  static pixels, {name}: PSNR {:.2} dB, SSIM {:.4}{}",
+                    st.mean_psnr,
+                    st.mean_ssim,
+                    st.lpips
+                        .map_or(String::new(), |l| format!(", LPIPS {l:.4}"))
+                ));
+            }
+        }
+        if let Some(b) = results.baseline.as_ref().and_then(|b| b.test.as_ref()) {
+            ctx.info(format!(
+                "  all pixels, no masks (baseline): PSNR {:.2} dB, SSIM {:.4}{}",
+                b.mean_psnr,
+                b.mean_ssim,
+                results
+                    .baseline
+                    .as_ref()
+                    .and_then(|r| r.test_lpips)
+                    .map_or(String::new(), |l| format!(", LPIPS {l:.4}"))
+            ));
+        }
         if results
             .train
             .as_ref()

@@ -114,32 +114,66 @@ fn held_out(
     } else {
         "RoMo masks"
     };
-    let mut models = vec![(main_name, VariantResult::new(t.clone(), 0.0))];
+    let mut outcomes = vec![(main_name, t)];
     if let Some(b) = baseline {
-        models.push(("no masks (baseline)", VariantResult::new(b.clone(), 0.0)));
+        outcomes.push(("no masks (baseline)", b));
     }
+    let lpips = |l: Option<f64>| l.map_or("-".into(), |l| format!("{l:.4}"));
+    let statics = t.test_static.as_ref().map_or(0, |s| s.masked_views);
+    let mut header = ["training", "PSNR", "SSIM", "LPIPS"]
+        .map(String::from)
+        .to_vec();
+    if statics > 0 {
+        header.extend(["static PSNR", "static SSIM", "static LPIPS"].map(String::from));
+    }
+    header.push("splats".into());
     rep.tables.push(Table {
         caption: format!(
-            "Held-out views ({}), {} steps each",
+            "Held-out views ({}), {} steps each{}",
             t.test.as_ref().map_or(0, |e| e.views.len()),
-            t.options.steps
+            t.options.steps,
+            if statics > 0 {
+                format!(
+                    "; static: the moving pixels of {statics} held-out frames (RoMo's masks) \
+                     left out, the same pixels for every model"
+                )
+            } else {
+                String::new()
+            }
         ),
-        header: ["training", "PSNR", "SSIM", "LPIPS", "splats"]
-            .map(String::from)
-            .to_vec(),
-        rows: models
+        header,
+        rows: outcomes
             .iter()
-            .map(|(name, v)| {
-                vec![
+            .map(|(name, o)| {
+                let (psnr, ssim) = o
+                    .test
+                    .as_ref()
+                    .map_or((f64::NAN, f64::NAN), |e| (e.mean_psnr, e.mean_ssim));
+                let mut row = vec![
                     (*name).into(),
-                    format!("{:.2}", v.psnr),
-                    format!("{:.4}", v.ssim),
-                    v.lpips.map_or("-".into(), |l| format!("{l:.4}")),
-                    v.splats.to_string(),
-                ]
+                    format!("{psnr:.2}"),
+                    format!("{ssim:.4}"),
+                    lpips(o.test_lpips),
+                ];
+                if statics > 0 {
+                    match &o.test_static {
+                        Some(s) => row.extend([
+                            format!("{:.2}", s.mean_psnr),
+                            format!("{:.4}", s.mean_ssim),
+                            lpips(s.lpips),
+                        ]),
+                        None => row.extend(["-".into(), "-".into(), "-".into()]),
+                    }
+                }
+                row.push(o.report.splats.to_string());
+                row
             })
             .collect(),
     });
+    let models: Vec<(&str, VariantResult)> = outcomes
+        .iter()
+        .map(|(n, o)| (*n, VariantResult::new((*o).clone(), 0.0)))
+        .collect();
     for (title, y, curve) in [
         ("training loss", "loss", (|v| v.loss_curve.clone()) as Curve),
         ("training PSNR", "dB", |v| v.psnr_curve.clone()),

@@ -240,6 +240,55 @@ pub struct TrainJob {
     pub opts: TrainOptions,
 }
 
+/// Held-out scores with the moving pixels of the held-out frames (their
+/// `masks/`) left out, as `eval views --mask-gt` does with ground truth: on
+/// a video the held-out frames have people in them that a masked model
+/// rightly does not reconstruct, so this is where models trained with and
+/// without masks compare on the same pixels.
+#[derive(Debug, Clone, serde::Serialize, serde::Deserialize)]
+pub struct StaticScores {
+    /// Held-out views that have a mask (the others count all their pixels).
+    pub masked_views: usize,
+    pub mean_psnr: f64,
+    pub mean_ssim: f64,
+    /// LPIPS-Alex with the moving pixels copied from the reference.
+    pub lpips: Option<f64>,
+}
+
+/// [`StaticScores`] of `splats` on held-out frames `idx`; `None` when none
+/// of them has a mask.
+fn score_static_pixels(
+    backend: &mut dyn TrainBackend,
+    splats: &splat::Splats,
+    scene: &Scene,
+    idx: &[usize],
+    ropts: &RenderOptions,
+    ctx: &Ctx,
+) -> anyhow::Result<Option<StaticScores>> {
+    let views = load_views(scene, idx, true)?;
+    let masked_views = views.iter().filter(|v| v.mask.is_some()).count();
+    if masked_views == 0 {
+        return Ok(None);
+    }
+    let (ev, images) = evaluate(backend, splats, &views, ropts)?;
+    let lpips = match super::eval_views::builtin_lpips()? {
+        Some(mut net) => Some(super::eval_views::mean_std(&net.score_views(&views, &images)?).0),
+        None => None,
+    };
+    ctx.info(format!(
+        "test views, static pixels ({masked_views} with masks): PSNR {:.2} dB, SSIM {:.4}{}",
+        ev.mean_psnr,
+        ev.mean_ssim,
+        lpips.map_or(String::new(), |l| format!(", LPIPS {l:.4}"))
+    ));
+    Ok(Some(StaticScores {
+        masked_views,
+        mean_psnr: ev.mean_psnr,
+        mean_ssim: ev.mean_ssim,
+        lpips,
+    }))
+}
+
 /// One sample of the training curves.
 #[derive(Debug, Clone, Copy, serde::Serialize, serde::Deserialize)]
 pub struct HistoryPoint {
@@ -268,6 +317,9 @@ pub struct TrainOutcome {
     /// Mean held-out LPIPS-Alex (when its weights are found).
     #[serde(default)]
     pub test_lpips: Option<f64>,
+    /// Held-out scores over static pixels only, when held-out frames have masks.
+    #[serde(default)]
+    pub test_static: Option<StaticScores>,
     /// About 100 samples of the loss / PSNR curves.
     pub history: Vec<HistoryPoint>,
     pub options: TrainOptions,
@@ -420,6 +472,7 @@ pub fn train(job: &TrainJob, ctx: &Ctx) -> anyhow::Result<TrainOutcome> {
         let mut test = None;
         let mut test_renders = Vec::new();
         let mut test_lpips = None;
+        let mut test_static = None;
         if !test_idx.is_empty() {
             let tviews = load_views(&scene, &test_idx, false)?;
             let ropts = RenderOptions {
@@ -452,6 +505,14 @@ pub fn train(job: &TrainJob, ctx: &Ctx) -> anyhow::Result<TrainOutcome> {
                     test_renders.push(path);
                 }
             }
+            test_static = score_static_pixels(
+                backend.as_mut(),
+                &end.splats,
+                &scene,
+                &test_idx,
+                &ropts,
+                ctx,
+            )?;
             test = Some(ev);
         }
         let outcome = TrainOutcome {
@@ -466,6 +527,7 @@ pub fn train(job: &TrainJob, ctx: &Ctx) -> anyhow::Result<TrainOutcome> {
             test,
             test_renders,
             test_lpips,
+            test_static,
             history,
             options: opts,
         };
