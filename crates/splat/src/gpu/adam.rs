@@ -95,8 +95,10 @@ impl Adam {
             return Ok(());
         }
         let u = ctx.uniform("adam_u", &a.uniforms);
-        let bind = self.bind(
+        self.record(
             ctx,
+            rec,
+            "adam_main",
             &AdamBindings {
                 u: &u,
                 params: a.params,
@@ -105,11 +107,6 @@ impl Adam {
                 exp_avg_sq: a.exp_avg_sq,
                 projected: a.visible,
             },
-        )?;
-        rec.dispatch(
-            &self.kernel,
-            "adam_main",
-            &bind,
             groups_1d(a.uniforms.n, WORKGROUP_SIZE),
         )
     }

@@ -6,7 +6,7 @@ use super::forward::ForwardState;
 use super::kernel::Recorder;
 use super::project::ParamBuffers;
 use super::project_backward::{GradBuffers, ProjectBackward, ProjectBackwardArgs};
-use super::rasterize_backward::{GRAD_STRIDE, RasterBackwardArgs, RasterizeBackward};
+use super::rasterize_backward::{GRAD_STRIDE, RasterBackwardBindings, RasterizeBackward};
 use super::{GpuContext, GpuError};
 use crate::types::{ProjectedGrads, SplatGrads};
 
@@ -52,7 +52,7 @@ pub fn record_backward(
     k.rasterize_backward.dispatch(
         ctx,
         rec,
-        &RasterBackwardArgs {
+        &RasterBackwardBindings {
             cam: &s.cam,
             projected: &s.projected,
             tile_values: &s.tile_values,
@@ -61,8 +61,8 @@ pub fn record_backward(
             last_contrib: &s.last_contrib,
             v_image: a.v_image,
             grads: a.v_proj,
-            grid: s.grid,
         },
+        s.grid,
     )?;
     k.project_backward.dispatch(
         ctx,

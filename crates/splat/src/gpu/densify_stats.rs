@@ -68,8 +68,10 @@ impl DensifyStatsKernel {
         if a.n == 0 {
             return Ok(());
         }
-        let bind = self.bind(
+        self.record(
             ctx,
+            rec,
+            "densify_stats_main",
             &StatsBindings {
                 cam: a.cam,
                 projected: a.projected,
@@ -79,11 +81,6 @@ impl DensifyStatsKernel {
                 max_radius: &a.stats.max_radius,
                 visible: &a.stats.visible,
             },
-        )?;
-        rec.dispatch(
-            &self.kernel,
-            "densify_stats_main",
-            &bind,
             groups_1d(a.n, WORKGROUP_SIZE),
         )
     }

@@ -44,47 +44,16 @@ kernel! {
     constants { WORKGROUP_SIZE }
 }
 
-/// Buffers of one binning step (bound by name).
-pub struct EmitArgs<'a> {
-    pub uniforms: &'a wgpu::Buffer,
-    pub projected: &'a wgpu::Buffer,
-    pub depth_keys: &'a wgpu::Buffer,
-    pub order: &'a wgpu::Buffer,
-    pub counts: &'a wgpu::Buffer,
-    pub offsets: &'a wgpu::Buffer,
-    pub tile_keys: &'a wgpu::Buffer,
-    pub tile_values: &'a wgpu::Buffer,
-    /// Number of splats.
-    pub n: u32,
-}
-
 impl EmitKeys {
-    /// Record `entry` ("depth_keys", "gather_counts" or "emit") over all splats.
+    /// Record `entry` ("depth_keys", "gather_counts" or "emit") over `n` splats.
     pub fn dispatch(
         &self,
         ctx: &GpuContext,
         rec: &mut Recorder,
         entry: &'static str,
-        args: &EmitArgs,
+        b: &EmitBindings,
+        n: u32,
     ) -> Result<(), GpuError> {
-        let bind = self.bind(
-            ctx,
-            &EmitBindings {
-                u: args.uniforms,
-                projected: args.projected,
-                depth_keys_out: args.depth_keys,
-                order: args.order,
-                counts: args.counts,
-                offsets: args.offsets,
-                tile_keys: args.tile_keys,
-                tile_values: args.tile_values,
-            },
-        )?;
-        rec.dispatch(
-            &self.kernel,
-            entry,
-            &bind,
-            groups_1d(args.n, WORKGROUP_SIZE),
-        )
+        self.record(ctx, rec, entry, b, groups_1d(n, WORKGROUP_SIZE))
     }
 }

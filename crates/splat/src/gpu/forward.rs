@@ -11,12 +11,12 @@
 //! to the second recording, so a step is two submits and allocates nothing
 //! once sizes settle.
 
-use super::emit_keys::{BinUniforms, EmitArgs, EmitKeys};
+use super::emit_keys::{BinUniforms, EmitBindings, EmitKeys};
 use super::kernel::{Recorder, Scratch};
 use super::prefix_sum::{PrefixSum, ScanArgs};
 use super::project::{CameraUniforms, ParamBuffers, Project, ProjectArgs};
 use super::radix_sort::{RadixSort, SortArgs, bits_for};
-use super::rasterize::{RasterArgs, Rasterize};
+use super::rasterize::{RasterBindings, Rasterize};
 use super::tile_ranges::{RangeArgs, TileRanges};
 use super::{GpuContext, GpuError};
 use crate::types::{ProjectedSplat, RasterOutput, RenderCamera, RenderOptions, Splats};
@@ -193,19 +193,18 @@ pub fn forward_in<'r>(
             projected: &projected,
         },
     )?;
-    let first = EmitArgs {
-        uniforms: &bin_u,
+    let first = EmitBindings {
+        u: &bin_u,
         projected: &projected,
-        depth_keys: &depth_keys,
+        depth_keys_out: &depth_keys,
         order: &order,
         counts: &counts,
         offsets: &offsets,
         tile_keys: &dummy,
         tile_values: &dummy,
-        n,
     };
     if n > 0 {
-        k.emit.dispatch(ctx, &mut rec, "depth_keys", &first)?;
+        k.emit.dispatch(ctx, &mut rec, "depth_keys", &first, n)?;
         k.sort.dispatch(
             ctx,
             &k.scan,
@@ -217,7 +216,7 @@ pub fn forward_in<'r>(
                 bits: 32,
             },
         )?;
-        k.emit.dispatch(ctx, &mut rec, "gather_counts", &first)?;
+        k.emit.dispatch(ctx, &mut rec, "gather_counts", &first, n)?;
     }
     k.scan.dispatch(
         ctx,
@@ -253,12 +252,12 @@ pub fn forward_in<'r>(
     let final_t = rec.storage("final_t", pixels * 4);
     let last_contrib = rec.storage("last_contrib", pixels * 4);
     if total > 0 {
-        let second = EmitArgs {
+        let second = EmitBindings {
             tile_keys: &tile_keys,
             tile_values: &tile_values,
             ..first
         };
-        k.emit.dispatch(ctx, &mut rec, "emit", &second)?;
+        k.emit.dispatch(ctx, &mut rec, "emit", &second, n)?;
         let bits = bits_for(num_tiles.saturating_sub(1));
         k.sort.dispatch(
             ctx,
@@ -285,7 +284,7 @@ pub fn forward_in<'r>(
     k.rasterize.dispatch(
         ctx,
         &mut rec,
-        &RasterArgs {
+        &RasterBindings {
             cam: &cam_buf,
             projected: &projected,
             tile_values: &tile_values,
@@ -293,8 +292,8 @@ pub fn forward_in<'r>(
             image: &image,
             final_t: &final_t,
             last_contrib: &last_contrib,
-            grid,
         },
+        grid,
     )?;
     Ok((
         ForwardState {

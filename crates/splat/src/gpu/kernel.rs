@@ -87,7 +87,8 @@ impl KernelDecl {
 }
 
 /// Declares one kernel: its [`KernelDecl`] static, a bindings struct and the
-/// host type (`new`, `bind`). The host module adds its own `dispatch`.
+/// host type (`new`, `bind`, `record`). The host module adds its own
+/// `dispatch`, which sizes the grid and fills the uniforms.
 ///
 /// ```ignore
 /// kernel! {
@@ -173,6 +174,20 @@ macro_rules! kernel {
                 b: &$bindings,
             ) -> Result<wgpu::BindGroup, $crate::gpu::GpuError> {
                 self.kernel.bind(ctx, &[b.$uname, $(b.$sname),+])
+            }
+
+            /// Record one dispatch of `entry` over `groups` with the
+            /// buffers `b` bound.
+            pub fn record(
+                &self,
+                ctx: &$crate::gpu::GpuContext,
+                rec: &mut $crate::gpu::kernel::Recorder,
+                entry: &'static str,
+                b: &$bindings,
+                groups: [u32; 3],
+            ) -> Result<(), $crate::gpu::GpuError> {
+                let bind = self.bind(ctx, b)?;
+                rec.dispatch(&self.kernel, entry, &bind, groups)
             }
         }
     };

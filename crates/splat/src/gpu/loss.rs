@@ -63,8 +63,10 @@ impl Loss {
         a: &LossArgs,
     ) -> Result<(), GpuError> {
         let u = ctx.uniform("loss_u", &a.uniforms);
-        let bind = self.bind(
+        self.record(
             ctx,
+            rec,
+            "l1_grad",
             &LossBindings {
                 u: &u,
                 image: a.image,
@@ -73,11 +75,6 @@ impl Loss {
                 v_image: a.v_image,
                 partials: a.partials,
             },
-        )?;
-        rec.dispatch(
-            &self.kernel,
-            "l1_grad",
-            &bind,
             groups_1d(a.uniforms.n_pixels, WORKGROUP_SIZE),
         )
     }

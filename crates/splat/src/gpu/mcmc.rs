@@ -113,8 +113,10 @@ impl McmcKernels {
                 pad2: 0.0,
             },
         );
-        let bind = self.noise.bind(
+        self.noise.record(
             ctx,
+            rec,
+            "mcmc_noise_main",
             &NoiseBindings {
                 u: &u,
                 means: &params.means,
@@ -122,11 +124,6 @@ impl McmcKernels {
                 rotations: &params.rotations,
                 opacity_logits: &params.opacity_logits,
             },
-        )?;
-        rec.dispatch(
-            &self.noise.kernel,
-            "mcmc_noise_main",
-            &bind,
             groups_1d(params.n, WORKGROUP_SIZE),
         )
     }
@@ -159,8 +156,10 @@ impl McmcKernels {
                 pad4: 0.0,
             },
         );
-        let bind = self.reg.bind(
+        self.reg.record(
             ctx,
+            rec,
+            "mcmc_reg_main",
             &RegBindings {
                 u: &u,
                 log_scales: &params.log_scales,
@@ -168,11 +167,6 @@ impl McmcKernels {
                 grad_log_scales: &grads.log_scales,
                 grad_opacity_logits: &grads.opacity_logits,
             },
-        )?;
-        rec.dispatch(
-            &self.reg.kernel,
-            "mcmc_reg_main",
-            &bind,
             groups_1d(params.n, WORKGROUP_SIZE),
         )
     }

@@ -121,8 +121,10 @@ impl Project {
         a: &ProjectArgs,
     ) -> Result<(), GpuError> {
         let p = a.params;
-        let bind = self.bind(
+        self.record(
             ctx,
+            rec,
+            "project_main",
             &ProjectBindings {
                 cam: a.cam,
                 means: &p.means,
@@ -132,11 +134,6 @@ impl Project {
                 sh: &p.sh,
                 projected: a.projected,
             },
-        )?;
-        rec.dispatch(
-            &self.kernel,
-            "project_main",
-            &bind,
             groups_1d(p.n, WORKGROUP_SIZE),
         )
     }

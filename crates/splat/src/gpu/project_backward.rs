@@ -79,8 +79,10 @@ impl ProjectBackward {
     ) -> Result<(), GpuError> {
         let (p, g) = (a.params, a.grads);
         let geom = rec.storage("g_geom", p.n as u64 * GEOM_FLOATS * 4);
-        let bind = self.bind(
+        self.record(
             ctx,
+            rec,
+            "project_backward_main",
             &ProjectBackwardBindings {
                 cam: a.cam,
                 means: &p.means,
@@ -92,11 +94,6 @@ impl ProjectBackward {
                 g_geom: &geom,
                 g_sh: &g.sh,
             },
-        )?;
-        rec.dispatch(
-            &self.kernel,
-            "project_backward_main",
-            &bind,
             groups_1d(p.n, WORKGROUP_SIZE),
         )?;
         // Planar segments of `g_geom` → the per-group gradient buffers.

@@ -27,46 +27,16 @@ kernel! {
     constants { THREADS }
 }
 
-/// Buffers of one forward raster.
-pub struct RasterArgs<'a> {
-    pub cam: &'a wgpu::Buffer,
-    pub projected: &'a wgpu::Buffer,
-    pub tile_values: &'a wgpu::Buffer,
-    pub ranges: &'a wgpu::Buffer,
-    /// `3·w·h` f32 out.
-    pub image: &'a wgpu::Buffer,
-    /// `w·h` f32 out.
-    pub final_t: &'a wgpu::Buffer,
-    /// `w·h` u32 out.
-    pub last_contrib: &'a wgpu::Buffer,
-    /// Tile grid.
-    pub grid: (u32, u32),
-}
-
 impl Rasterize {
+    /// Record the raster of the `grid` tiles into `b.image`, `b.final_t`
+    /// (`w·h` f32) and `b.last_contrib` (`w·h` u32).
     pub fn dispatch(
         &self,
         ctx: &GpuContext,
         rec: &mut Recorder,
-        a: &RasterArgs,
+        b: &RasterBindings,
+        grid: (u32, u32),
     ) -> Result<(), GpuError> {
-        let bind = self.bind(
-            ctx,
-            &RasterBindings {
-                cam: a.cam,
-                projected: a.projected,
-                tile_values: a.tile_values,
-                ranges: a.ranges,
-                image: a.image,
-                final_t: a.final_t,
-                last_contrib: a.last_contrib,
-            },
-        )?;
-        rec.dispatch(
-            &self.kernel,
-            "rasterize_main",
-            &bind,
-            [a.grid.0, a.grid.1, 1],
-        )
+        self.record(ctx, rec, "rasterize_main", b, [grid.0, grid.1, 1])
     }
 }

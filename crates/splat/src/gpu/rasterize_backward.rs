@@ -32,48 +32,18 @@ kernel! {
     grad_atomics
 }
 
-/// Buffers of one backward raster.
-pub struct RasterBackwardArgs<'a> {
-    pub cam: &'a wgpu::Buffer,
-    pub projected: &'a wgpu::Buffer,
-    pub tile_values: &'a wgpu::Buffer,
-    pub ranges: &'a wgpu::Buffer,
-    pub final_t: &'a wgpu::Buffer,
-    pub last_contrib: &'a wgpu::Buffer,
-    /// dL/d image, `3·w·h` f32.
-    pub v_image: &'a wgpu::Buffer,
-    /// `12·n` f32 out ([`crate::types::ProjectedGrads`] layout); cleared here.
-    pub grads: &'a wgpu::Buffer,
-    pub grid: (u32, u32),
-}
-
 impl RasterizeBackward {
-    /// Record: clear `grads`, then accumulate into it.
+    /// Record: clear `b.grads` (`12·n` f32, [`crate::types::ProjectedGrads`]
+    /// layout), then accumulate dL/d(projected splat) into it from
+    /// `b.v_image` (dL/d image, `3·w·h` f32) over the `grid` tiles.
     pub fn dispatch(
         &self,
         ctx: &GpuContext,
         rec: &mut Recorder,
-        a: &RasterBackwardArgs,
+        b: &RasterBackwardBindings,
+        grid: (u32, u32),
     ) -> Result<(), GpuError> {
-        rec.encoder.clear_buffer(a.grads, 0, None);
-        let bind = self.bind(
-            ctx,
-            &RasterBackwardBindings {
-                cam: a.cam,
-                projected: a.projected,
-                tile_values: a.tile_values,
-                ranges: a.ranges,
-                final_t: a.final_t,
-                last_contrib: a.last_contrib,
-                v_image: a.v_image,
-                grads: a.grads,
-            },
-        )?;
-        rec.dispatch(
-            &self.kernel,
-            "rasterize_backward_main",
-            &bind,
-            [a.grid.0, a.grid.1, 1],
-        )
+        rec.encoder.clear_buffer(b.grads, 0, None);
+        self.record(ctx, rec, "rasterize_backward_main", b, [grid.0, grid.1, 1])
     }
 }

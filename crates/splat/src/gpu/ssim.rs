@@ -135,26 +135,23 @@ impl Ssim {
                     ..base
                 },
             );
-            let bind = self.bind(
-                ctx,
-                &SsimBindings {
-                    u: &u,
-                    image: a.image,
-                    target_rgb: a.target,
-                    mask: a.mask,
-                    src,
-                    dst,
-                    v_image: a.v_image,
-                    partials: a.partials,
-                },
-            )?;
             let seg = |len: u32| len.div_ceil(BLUR_SEGMENT);
             let items = match entry {
                 "blur_h" => maps * a.height * seg(a.width),
                 "blur_v" => maps * a.width * seg(a.height),
                 _ => n,
             };
-            rec.dispatch(&self.kernel, entry, &bind, groups_1d(items, WORKGROUP_SIZE))?;
+            let b = SsimBindings {
+                u: &u,
+                image: a.image,
+                target_rgb: a.target,
+                mask: a.mask,
+                src,
+                dst,
+                v_image: a.v_image,
+                partials: a.partials,
+            };
+            self.record(ctx, rec, entry, &b, groups_1d(items, WORKGROUP_SIZE))?;
         }
         Ok(())
     }
@@ -167,19 +164,7 @@ mod tests {
     use crate::gpu::loss::{Loss, LossArgs, LossUniforms, blocks};
 
     fn img(w: usize, h: usize, phase: f64) -> Vec<f32> {
-        let mut v = vec![];
-        for y in 0..h {
-            for x in 0..w {
-                for c in 0..3 {
-                    v.push(
-                        (0.5 + 0.4 * (0.37 * x as f64 + 0.23 * y as f64 + c as f64 + phase).sin()
-                            + 0.05 * ((x * 7 + y * 13 + c * 5) % 11) as f64 / 11.0)
-                            as f32,
-                    );
-                }
-            }
-        }
-        v
+        crate::train::loss::test_image(w, h, phase, 0.05)
     }
 
     /// GPU masked L1 + D-SSIM loss and gradient vs the CPU `loss_and_grad`.

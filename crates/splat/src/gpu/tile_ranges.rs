@@ -60,18 +60,15 @@ impl TileRanges {
                 pad: [0; 2],
             },
         );
-        let bind = self.bind(
+        self.record(
             ctx,
+            rec,
+            "ranges_main",
             &RangeBindings {
                 u: &u,
                 tile_keys: args.tile_keys,
                 ranges: args.ranges,
             },
-        )?;
-        rec.dispatch(
-            &self.kernel,
-            "ranges_main",
-            &bind,
             groups_1d(args.n, WORKGROUP_SIZE),
         )
     }
