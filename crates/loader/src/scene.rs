@@ -250,33 +250,29 @@ impl Scene {
             let mp = mask_path(&root.join("masks"), name);
             let ns = ns_masks.get(name).filter(|_| !mp.is_file());
             let mp = ns.cloned().unwrap_or(mp);
-            let mask_path = if mp.is_file() {
-                let md = dims(&mp)?;
-                if md != full {
+            // A mask must have its image's size.
+            let check_size = |p: &Path, what: &str| -> Result<()> {
+                let d = dims(p)?;
+                if d != full {
                     return Err(LoaderError::format(
-                        &mp,
+                        p,
                         format!(
-                            "mask is {}x{} but its image {name} is {}x{}",
-                            md.0, md.1, full.0, full.1
+                            "{what} is {}x{} but its image {name} is {}x{}",
+                            d.0, d.1, full.0, full.1
                         ),
                     ));
                 }
+                Ok(())
+            };
+            let mask_path = if mp.is_file() {
+                check_size(&mp, "mask")?;
                 Some(mp)
             } else {
                 None
             };
             let gp = gt_motion_path(&root.join("gt_motion"), name);
             if gp.is_file() {
-                let gd = dims(&gp)?;
-                if gd != full {
-                    return Err(LoaderError::format(
-                        &gp,
-                        format!(
-                            "ground-truth mask is {}x{} but its image {name} is {}x{}",
-                            gd.0, gd.1, full.0, full.1
-                        ),
-                    ));
-                }
+                check_size(&gp, "ground-truth mask")?;
             }
             frames.push(Frame {
                 name: name.clone(),

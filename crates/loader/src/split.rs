@@ -227,22 +227,21 @@ mod tests {
     fn bad_entries_name_the_file() {
         let dir = tempfile::tempdir().unwrap();
         let p = dir.path().join("split.json");
-        std::fs::write(&p, r#"{"clutter": [9], "extra": []}"#).unwrap();
-        let e = read_split(&p)
-            .unwrap()
-            .resolve(&p, &names())
-            .unwrap_err()
-            .to_string();
+        // The error of resolving `json` against `names()`.
+        let resolve_err = |json: &str| {
+            std::fs::write(&p, json).unwrap();
+            read_split(&p)
+                .unwrap()
+                .resolve(&p, &names())
+                .unwrap_err()
+                .to_string()
+        };
+        let e = resolve_err(r#"{"clutter": [9], "extra": []}"#);
         assert!(
             e.contains("split.json") && e.contains("index 9 out of range"),
             "{e}"
         );
-        std::fs::write(&p, r#"{"clutter": [], "extra": ["zzz.png"]}"#).unwrap();
-        let e = read_split(&p)
-            .unwrap()
-            .resolve(&p, &names())
-            .unwrap_err()
-            .to_string();
+        let e = resolve_err(r#"{"clutter": [], "extra": ["zzz.png"]}"#);
         assert!(e.contains("split.json") && e.contains("zzz.png"), "{e}");
         std::fs::write(&p, r#"{"clutter": [1.5]}"#).unwrap();
         let e = read_split(&p).unwrap_err().to_string();
@@ -257,12 +256,7 @@ mod tests {
             "{e}"
         );
         assert!(!e.contains("untagged"), "{e}");
-        std::fs::write(&p, r#"{"clutter": [0, 1], "extra": ["001.jpg"]}"#).unwrap();
-        let e = read_split(&p)
-            .unwrap()
-            .resolve(&p, &names())
-            .unwrap_err()
-            .to_string();
+        let e = resolve_err(r#"{"clutter": [0, 1], "extra": ["001.jpg"]}"#);
         assert!(
             e.contains("split.json") && e.contains("image 1 (001.jpg) is in both clutter"),
             "{e}"

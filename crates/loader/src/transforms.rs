@@ -295,6 +295,21 @@ pub fn resolve_image_path(base: &Path, file_path: &str) -> Option<PathBuf> {
         .find(|c| c.is_file())
 }
 
+/// The image a frame of the transforms file `path` lists (see
+/// [`resolve_image_path`]) and its file name; missing is an error naming
+/// `path`.
+fn listed_image(path: &Path, base: &Path, file_path: &str) -> Result<(PathBuf, String)> {
+    let image = resolve_image_path(base, file_path).ok_or_else(|| LoaderError::Missing {
+        path: base.join(file_path),
+        context: format!("image listed in {}", path.display()),
+    })?;
+    let name = image
+        .file_name()
+        .map(|s| s.to_string_lossy().into_owned())
+        .unwrap_or_default();
+    Ok((image, name))
+}
+
 impl Transforms {
     /// Build from COLMAP cameras and poses. `entries` are (file_path, camera,
     /// pose). Intrinsics are global when every camera is equal, else per frame.
@@ -345,15 +360,7 @@ impl Transforms {
     pub fn resolve(&self, path: &Path, base: &Path) -> Result<Vec<ResolvedFrame>> {
         let mut out = Vec::with_capacity(self.frames.len());
         for (idx, f) in self.frames.iter().enumerate() {
-            let image_path =
-                resolve_image_path(base, &f.file_path).ok_or_else(|| LoaderError::Missing {
-                    path: base.join(&f.file_path),
-                    context: format!("image listed in {}", path.display()),
-                })?;
-            let name = image_path
-                .file_name()
-                .map(|s| s.to_string_lossy().into_owned())
-                .unwrap_or_default();
+            let (image_path, name) = listed_image(path, base, &f.file_path)?;
             if !is_inside(base, &image_path) {
                 return Err(LoaderError::format(
                     path,
@@ -484,15 +491,7 @@ impl Transforms {
         let mut place = Vec::new();
         let slash = |p: PathBuf| p.to_string_lossy().replace('\\', "/");
         for (idx, f) in t.frames.iter_mut().enumerate() {
-            let image =
-                resolve_image_path(base, &f.file_path).ok_or_else(|| LoaderError::Missing {
-                    path: base.join(&f.file_path),
-                    context: format!("image listed in {}", path.display()),
-                })?;
-            let name = image
-                .file_name()
-                .map(|s| s.to_string_lossy().into_owned())
-                .unwrap_or_default();
+            let (image, name) = listed_image(path, base, &f.file_path)?;
             let mask = crate::masks::mask_path(masks_dir, &name);
             let found = crate::masks::mask_path(present, &name);
             if !found.is_file() {

@@ -3,11 +3,10 @@
 //! Counts are checked against the bytes left before allocating, so a corrupt
 //! count fails cleanly instead of exhausting memory.
 
-use super::{ColmapImage, ColmapModel, FileOrder, Point2D, Point3D, model_file};
+use super::{ColmapImage, ColmapModel, Point2D, Point3D, Records, read_model_files};
 use crate::camera::{Camera, CameraModel, Pose};
 use crate::error::{LoaderError, Result};
 use crate::io::{read_bytes, write_atomic};
-use std::collections::BTreeMap;
 use std::io::Write;
 use std::path::Path;
 
@@ -119,12 +118,11 @@ impl<'a> Cursor<'a> {
     }
 }
 
-fn read_cameras(path: &Path) -> Result<(BTreeMap<u32, Camera>, Vec<u32>)> {
+fn read_cameras(path: &Path) -> Result<Records<u32, Camera>> {
     let buf = read_bytes(path)?;
     let mut c = Cursor::new(&buf, path);
     let n = c.count("number of cameras", 24)?;
-    let mut map = BTreeMap::new();
-    let mut order = Vec::with_capacity(n);
+    let mut records = Records::with_capacity(n);
     for _ in 0..n {
         let id = c.u32("camera id")?;
         let model_id = c.i32("camera model id")?;
@@ -140,36 +138,24 @@ fn read_cameras(path: &Path) -> Result<(BTreeMap<u32, Camera>, Vec<u32>)> {
         for _ in 0..model.num_params() {
             params.push(c.f64("camera params")?);
         }
-        if map
-            .insert(
-                id,
-                Camera {
-                    id,
-                    model,
-                    width,
-                    height,
-                    params,
-                },
-            )
-            .is_some()
-        {
-            return Err(LoaderError::format(
-                path,
-                format!("duplicate camera id {id}"),
-            ));
-        }
-        order.push(id);
+        let record = Camera {
+            id,
+            model,
+            width,
+            height,
+            params,
+        };
+        records.insert(path, None, "camera", id, record)?;
     }
     c.finish()?;
-    Ok((map, order))
+    Ok(records)
 }
 
-fn read_images(path: &Path) -> Result<(BTreeMap<u32, ColmapImage>, Vec<u32>)> {
+fn read_images(path: &Path) -> Result<Records<u32, ColmapImage>> {
     let buf = read_bytes(path)?;
     let mut c = Cursor::new(&buf, path);
     let n = c.count("number of images", 4 + 56 + 4 + 1 + 8)?;
-    let mut map = BTreeMap::new();
-    let mut order = Vec::with_capacity(n);
+    let mut records = Records::with_capacity(n);
     for _ in 0..n {
         let id = c.u32("image id")?;
         let qvec = c.f64s::<4>("image qvec")?;
@@ -193,24 +179,17 @@ fn read_images(path: &Path) -> Result<(BTreeMap<u32, ColmapImage>, Vec<u32>)> {
             name,
             points2d,
         };
-        if map.insert(id, im).is_some() {
-            return Err(LoaderError::format(
-                path,
-                format!("duplicate image id {id}"),
-            ));
-        }
-        order.push(id);
+        records.insert(path, None, "image", id, im)?;
     }
     c.finish()?;
-    Ok((map, order))
+    Ok(records)
 }
 
-fn read_points(path: &Path) -> Result<(BTreeMap<u64, Point3D>, Vec<u64>)> {
+fn read_points(path: &Path) -> Result<Records<u64, Point3D>> {
     let buf = read_bytes(path)?;
     let mut c = Cursor::new(&buf, path);
     let n = c.count("number of points3D", 8 + 24 + 3 + 8 + 8)?;
-    let mut map = BTreeMap::new();
-    let mut order = Vec::with_capacity(n);
+    let mut records = Records::with_capacity(n);
     for _ in 0..n {
         let id = c.u64("point3D id")?;
         let xyz = c.f64s::<3>("point3D xyz")?;
@@ -225,48 +204,22 @@ fn read_points(path: &Path) -> Result<(BTreeMap<u64, Point3D>, Vec<u64>)> {
         for _ in 0..nt {
             track.push((c.u32("track image id")?, c.u32("track point2D idx")?));
         }
-        if map
-            .insert(
-                id,
-                Point3D {
-                    id,
-                    xyz,
-                    rgb,
-                    error,
-                    track,
-                },
-            )
-            .is_some()
-        {
-            return Err(LoaderError::format(
-                path,
-                format!("duplicate point3D id {id}"),
-            ));
-        }
-        order.push(id);
+        let record = Point3D {
+            id,
+            xyz,
+            rgb,
+            error,
+            track,
+        };
+        records.insert(path, None, "point3D", id, record)?;
     }
     c.finish()?;
-    Ok((map, order))
+    Ok(records)
 }
 
 /// Read `cameras.bin`, `images.bin` and `points3D.bin` from `dir`.
 pub fn read_model_binary(dir: impl AsRef<Path>) -> Result<ColmapModel> {
-    let dir = dir.as_ref();
-    let (cameras, co) = read_cameras(&model_file(dir, "cameras.bin")?)?;
-    let (images, io) = read_images(&model_file(dir, "images.bin")?)?;
-    let (points3d, po) = read_points(&model_file(dir, "points3D.bin")?)?;
-    let model = ColmapModel {
-        cameras,
-        images,
-        points3d,
-        file_order: FileOrder {
-            cameras: co,
-            images: io,
-            points3d: po,
-        },
-    };
-    model.validate_files(dir, Some("bin"))?;
-    Ok(model)
+    read_model_files(dir.as_ref(), "bin", read_cameras, read_images, read_points)
 }
 
 /// Encode `cameras.bin`.

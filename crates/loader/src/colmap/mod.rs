@@ -269,6 +269,72 @@ pub fn read_model(dir: impl AsRef<Path>) -> Result<ColmapModel> {
     }
 }
 
+/// The records of one model file, keyed by id, with the order they appeared
+/// in (see [`FileOrder`]); a repeated id is an error naming the file.
+pub(crate) struct Records<K, V> {
+    pub map: BTreeMap<K, V>,
+    pub order: Vec<K>,
+}
+
+impl<K: Ord + Copy + std::fmt::Display, V> Records<K, V> {
+    pub fn with_capacity(n: usize) -> Self {
+        Records {
+            map: BTreeMap::new(),
+            order: Vec::with_capacity(n),
+        }
+    }
+
+    /// Add record `id` (a `what`: "camera", "image", "point3D") read from
+    /// `path`, at text line `line` when there is one.
+    pub fn insert(
+        &mut self,
+        path: &Path,
+        line: Option<usize>,
+        what: &str,
+        id: K,
+        v: V,
+    ) -> Result<()> {
+        if self.map.insert(id, v).is_some() {
+            let at = line.map_or(String::new(), |ln| format!("line {ln}: "));
+            return Err(LoaderError::format(
+                path,
+                format!("{at}duplicate {what} id {id}"),
+            ));
+        }
+        self.order.push(id);
+        Ok(())
+    }
+}
+
+/// A reader of one model file.
+pub(crate) type ReadFile<K, V> = fn(&Path) -> Result<Records<K, V>>;
+
+/// Read `cameras.EXT`, `images.EXT` and `points3D.EXT` from `dir` with the
+/// format's three readers, then validate the model.
+pub(crate) fn read_model_files(
+    dir: &Path,
+    ext: &str,
+    cameras: ReadFile<u32, Camera>,
+    images: ReadFile<u32, ColmapImage>,
+    points: ReadFile<u64, Point3D>,
+) -> Result<ColmapModel> {
+    let c = cameras(&model_file(dir, &format!("cameras.{ext}"))?)?;
+    let i = images(&model_file(dir, &format!("images.{ext}"))?)?;
+    let p = points(&model_file(dir, &format!("points3D.{ext}"))?)?;
+    let model = ColmapModel {
+        cameras: c.map,
+        images: i.map,
+        points3d: p.map,
+        file_order: FileOrder {
+            cameras: c.order,
+            images: i.order,
+            points3d: p.order,
+        },
+    };
+    model.validate_files(dir, Some(ext))?;
+    Ok(model)
+}
+
 /// Path of a model file, failing with a clear error when it is absent.
 pub(crate) fn model_file(dir: &Path, name: &str) -> Result<PathBuf> {
     let p = dir.join(name);
@@ -395,7 +461,7 @@ mod tests {
     }
 
     /// Every unusable record is refused at read time, naming the file and
-    /// the record (the trainer used to accept them and train on garbage).
+    /// the record (the trainer would otherwise train on garbage).
     #[test]
     fn unusable_records_are_refused_naming_file_and_record() {
         let dir = tempfile::tempdir().unwrap();

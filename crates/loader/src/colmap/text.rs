@@ -2,11 +2,10 @@
 //! as written by COLMAP's `Reconstruction::Write*Text`. Floats are written in
 //! Rust's shortest round-trip form, so text → model → text is lossless.
 
-use super::{ColmapImage, ColmapModel, FileOrder, Point2D, Point3D, model_file};
+use super::{ColmapImage, ColmapModel, Point2D, Point3D, Records, read_model_files};
 use crate::camera::{Camera, CameraModel, Pose};
 use crate::error::{LoaderError, Result};
 use crate::io::{read_string, write_atomic};
-use std::collections::BTreeMap;
 use std::fmt::Write as _;
 use std::io::Write;
 use std::path::Path;
@@ -25,10 +24,9 @@ fn is_data(line: &str) -> bool {
     !t.is_empty() && !t.starts_with('#')
 }
 
-fn read_cameras(path: &Path) -> Result<(BTreeMap<u32, Camera>, Vec<u32>)> {
+fn read_cameras(path: &Path) -> Result<Records<u32, Camera>> {
     let text = read_string(path)?;
-    let mut map = BTreeMap::new();
-    let mut order = Vec::new();
+    let mut records = Records::with_capacity(0);
     for (i, line) in text.lines().enumerate().filter(|(_, l)| is_data(l)) {
         let ln = i + 1;
         let mut it = line.split_whitespace();
@@ -55,33 +53,21 @@ fn read_cameras(path: &Path) -> Result<(BTreeMap<u32, Camera>, Vec<u32>)> {
                 ),
             ));
         }
-        if map
-            .insert(
-                id,
-                Camera {
-                    id,
-                    model,
-                    width,
-                    height,
-                    params,
-                },
-            )
-            .is_some()
-        {
-            return Err(LoaderError::format(
-                path,
-                format!("line {ln}: duplicate camera id {id}"),
-            ));
-        }
-        order.push(id);
+        let record = Camera {
+            id,
+            model,
+            width,
+            height,
+            params,
+        };
+        records.insert(path, Some(ln), "camera", id, record)?;
     }
-    Ok((map, order))
+    Ok(records)
 }
 
-fn read_images(path: &Path) -> Result<(BTreeMap<u32, ColmapImage>, Vec<u32>)> {
+fn read_images(path: &Path) -> Result<Records<u32, ColmapImage>> {
     let text = read_string(path)?;
-    let mut map = BTreeMap::new();
-    let mut order = Vec::new();
+    let mut records = Records::with_capacity(0);
     let mut lines = text.lines().enumerate();
     while let Some((i, line)) = lines.next() {
         if !is_data(line) {
@@ -129,33 +115,21 @@ fn read_images(path: &Path) -> Result<(BTreeMap<u32, ColmapImage>, Vec<u32>)> {
             qvec: [v[0], v[1], v[2], v[3]],
             tvec: [v[4], v[5], v[6]],
         };
-        if map
-            .insert(
-                id,
-                ColmapImage {
-                    id,
-                    pose,
-                    camera_id,
-                    name,
-                    points2d,
-                },
-            )
-            .is_some()
-        {
-            return Err(LoaderError::format(
-                path,
-                format!("line {ln}: duplicate image id {id}"),
-            ));
-        }
-        order.push(id);
+        let record = ColmapImage {
+            id,
+            pose,
+            camera_id,
+            name,
+            points2d,
+        };
+        records.insert(path, Some(ln), "image", id, record)?;
     }
-    Ok((map, order))
+    Ok(records)
 }
 
-fn read_points(path: &Path) -> Result<(BTreeMap<u64, Point3D>, Vec<u64>)> {
+fn read_points(path: &Path) -> Result<Records<u64, Point3D>> {
     let text = read_string(path)?;
-    let mut map = BTreeMap::new();
-    let mut order = Vec::new();
+    let mut records = Records::with_capacity(0);
     for (i, line) in text.lines().enumerate().filter(|(_, l)| is_data(l)) {
         let ln = i + 1;
         let mut it = line.split_whitespace();
@@ -185,47 +159,21 @@ fn read_points(path: &Path) -> Result<(BTreeMap<u64, Point3D>, Vec<u64>)> {
                 ))
             })
             .collect::<Result<Vec<(u32, u32)>>>()?;
-        if map
-            .insert(
-                id,
-                Point3D {
-                    id,
-                    xyz,
-                    rgb,
-                    error,
-                    track,
-                },
-            )
-            .is_some()
-        {
-            return Err(LoaderError::format(
-                path,
-                format!("line {ln}: duplicate point3D id {id}"),
-            ));
-        }
-        order.push(id);
+        let record = Point3D {
+            id,
+            xyz,
+            rgb,
+            error,
+            track,
+        };
+        records.insert(path, Some(ln), "point3D", id, record)?;
     }
-    Ok((map, order))
+    Ok(records)
 }
 
 /// Read `cameras.txt`, `images.txt` and `points3D.txt` from `dir`.
 pub fn read_model_text(dir: impl AsRef<Path>) -> Result<ColmapModel> {
-    let dir = dir.as_ref();
-    let (cameras, co) = read_cameras(&model_file(dir, "cameras.txt")?)?;
-    let (images, io) = read_images(&model_file(dir, "images.txt")?)?;
-    let (points3d, po) = read_points(&model_file(dir, "points3D.txt")?)?;
-    let model = ColmapModel {
-        cameras,
-        images,
-        points3d,
-        file_order: FileOrder {
-            cameras: co,
-            images: io,
-            points3d: po,
-        },
-    };
-    model.validate_files(dir, Some("txt"))?;
-    Ok(model)
+    read_model_files(dir.as_ref(), "txt", read_cameras, read_images, read_points)
 }
 
 fn cameras_text(m: &ColmapModel) -> String {

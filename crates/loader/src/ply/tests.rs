@@ -208,8 +208,8 @@ fn point_cloud_ply_is_readable_header() {
 }
 
 /// Headers that claim far more data than the file holds give an error, and
-/// nothing is allocated for the claimed count (a 10^12-vertex ASCII header
-/// used to ask for 248 TB and abort).
+/// nothing is allocated for the claimed count (allocating for a 10^12-vertex
+/// ASCII header would ask for 248 TB and abort).
 #[test]
 fn huge_header_counts_are_bounded_by_the_file() {
     let one = "1 2 3 0 0 1 0.5 0.25 0.125 0 -1 -1.5 -0.5 1 0 0 0";
