@@ -1,7 +1,7 @@
 //! Real COLMAP 3.8 on the small built-in scene (generated into a scratch
 //! folder): the pose stage registers every frame with and without masks, the
 //! masks are honoured (no keypoint on a masked pixel), and a model written by
-//! real COLMAP round-trips through the loader byte for byte (issue 2 §5).
+//! real COLMAP round-trips through the loader byte for byte.
 //!
 //! With `CI` set, a missing `colmap` fails these tests; without it they skip.
 
@@ -15,21 +15,9 @@ use pose::metrics::{NamedPose, PoseMetricsOptions, evaluate};
 use std::path::{Path, PathBuf};
 use std::sync::OnceLock;
 
-/// True when colmap runs; panics under CI when it does not.
-fn colmap_available() -> bool {
-    let ok = std::process::Command::new("colmap")
-        .arg("-h")
-        .output()
-        .is_ok_and(|o| String::from_utf8_lossy(&o.stdout).contains("COLMAP"));
-    if !ok {
-        assert!(
-            std::env::var_os("CI").is_none(),
-            "CI is set but `colmap` cannot be run: apt-get install -y colmap"
-        );
-        eprintln!("colmap not found: skipping (set CI to make this a failure)");
-    }
-    ok
-}
+#[path = "../../crates/pose/tests/common/mod.rs"]
+mod common;
+use common::colmap_available;
 
 /// This process's scratch root under cargo's integration-test tmp dir; roots
 /// left by earlier (dead) test processes are removed on first use.

@@ -610,7 +610,9 @@ pub fn run_colmap(
 
 /// [`run_colmap`] that stops with [`PoseError::Cancelled`] once `cancel` is
 /// set (the running COLMAP process is killed; the database keeps what was
-/// done and a rerun resumes from it).
+/// done and a rerun resumes from it). The steps: pick the images, decide what
+/// the kept database can resume, extract features, match, map (retried once
+/// with relaxed initialisation), undistort, install the largest model.
 pub fn run_colmap_cancellable(
     paths: &ColmapPaths,
     opts: &ColmapOptions,
@@ -620,23 +622,7 @@ pub fn run_colmap_cancellable(
     opts.validate()?;
     let t0 = Instant::now();
     let version = colmap_version(&opts.colmap)?;
-    let all_names = list_images(&paths.images)?;
-    let names: Vec<String> = all_names.iter().step_by(opts.stride).cloned().collect();
-    if names.len() < 2 {
-        return Err(PoseError::Invalid(format!(
-            "{}: {} images{}; structure from motion needs at least 2",
-            paths.images.display(),
-            names.len(),
-            if opts.stride > 1 {
-                format!(" at stride {}", opts.stride)
-            } else {
-                String::new()
-            }
-        )));
-    }
-    if opts.use_masks {
-        check_masks(&paths.images, &paths.masks, &names)?;
-    }
+    let names = selected_images(paths, opts)?;
     std::fs::create_dir_all(&paths.work).map_err(|e| PoseError::io(&paths.work, e))?;
     let db = paths.work.join("database.db");
     let state_path = paths.work.join("resume.json");
@@ -660,71 +646,13 @@ pub fn run_colmap_cancellable(
         work: paths.work.clone(),
         images: names.len() as u64,
     };
-    let seed = arg("random_seed", opts.seed);
-
-    match decision {
-        Decision::Fresh => {
-            remove_database(&db)?;
-            // Written before extraction starts: an interrupted extraction
-            // leaves a database that matches this state.
-            resume::save(
-                &state_path,
-                &ResumeState {
-                    features: feature_key.clone(),
-                    matching: None,
-                },
-            )?;
-        }
-        Decision::KeepFeatures => {
-            r.note(
-                "database_cleaner",
-                "matching settings changed: clearing the kept matches".into(),
-            );
-            let mut a: Vec<String> = Vec::new();
-            a.extend(arg("database_path", path_str(&db)));
-            a.extend(arg("type", "matches"));
-            let out = r.step("database_cleaner", "database_cleaner", a)?;
-            require_success("database_cleaner", &out)?;
-        }
-        Decision::KeepAll => r.note(
-            "feature_extractor",
-            format!(
-                "resuming from the kept database {} (done images and pairs are skipped)",
-                db.display()
-            ),
-        ),
-    }
-
-    // 1. Features.
-    let mut a: Vec<String> = Vec::new();
-    a.extend(arg("database_path", path_str(&db)));
-    a.extend(arg("image_path", path_str(&paths.images)));
-    a.extend(arg("image_list_path", path_str(&list)));
-    a.extend(arg("ImageReader.camera_model", opts.camera_model.name()));
-    a.extend(arg(
-        "ImageReader.single_camera",
-        u8::from(opts.single_camera),
-    ));
-    if opts.use_masks {
-        a.extend(arg("ImageReader.mask_path", path_str(&paths.masks)));
-    }
-    a.extend(arg("SiftExtraction.use_gpu", 0));
-    a.extend(arg("SiftExtraction.num_threads", opts.threads));
-    a.extend(arg("SiftExtraction.max_image_size", opts.max_image_size));
-    a.extend(arg(
-        "SiftExtraction.max_num_features",
-        opts.max_num_features,
-    ));
-    a.extend(seed.clone());
-    let out = r.step("feature_extractor", "feature_extractor", a)?;
-    require_success("feature_extractor", &out)?;
-    let features_reused = std::fs::read_to_string(&out.log)
-        .unwrap_or_default()
-        .lines()
-        .filter(|l| l.contains("SKIP: Features for image already extracted"))
-        .count();
-
-    // 2. Matching.
+    let steps = Steps {
+        paths,
+        db,
+        seed: arg("random_seed", opts.seed),
+    };
+    steps.prepare_database(&mut r, decision, &state_path, &feature_key)?;
+    let features_reused = steps.extract_features(&mut r, &list)?;
     resume::save(
         &state_path,
         &ResumeState {
@@ -732,100 +660,14 @@ pub fn run_colmap_cancellable(
             matching: Some(match_key),
         },
     )?;
-    let mut a: Vec<String> = Vec::new();
-    a.extend(arg("database_path", path_str(&db)));
-    a.extend(arg("SiftMatching.use_gpu", 0));
-    a.extend(arg("SiftMatching.num_threads", opts.threads));
-    if opts.matcher == Matcher::Sequential {
-        a.extend(arg("SequentialMatching.overlap", opts.overlap));
-        a.extend(arg(
-            "SequentialMatching.loop_detection",
-            u8::from(opts.loop_detection),
-        ));
-    }
-    a.extend(seed.clone());
-    let step = opts.matcher.step();
-    let out = r.step(step, step, a)?;
-    require_success(step, &out)?;
-
+    steps.match_features(&mut r)?;
     // The matcher's verdicts on the image pairs: they name the cause when no
     // model comes out, and warn when one is built without parallax.
-    let pairs = crate::pairs::read_pair_stats(&db).ok();
+    let pairs = crate::pairs::read_pair_stats(&steps.db).ok();
     let no_parallax = pairs.is_some_and(|p| p.no_parallax());
-
-    // 3. Mapping, retried once with relaxed initialisation.
-    let mut a: Vec<String> = Vec::new();
-    a.extend(arg("database_path", path_str(&db)));
-    a.extend(arg("image_path", path_str(&paths.images)));
-    a.extend(arg("output_path", path_str(&sparse)));
-    a.extend(arg("Mapper.num_threads", opts.threads));
-    a.extend(opts.mapper.args());
-    a.extend(seed.clone());
-    let mut out = r.step("mapper", "mapper", a.clone())?;
-    let mut models = read_models(&sparse)?;
-    let no_init = |o: &StepOutcome| {
-        std::fs::read_to_string(&o.log)
-            .unwrap_or_default()
-            .contains("No good initial image pair found")
-    };
-    let mut init_retried = false;
-    if models.is_empty() && opts.retry_init {
-        r.note(
-            "mapper",
-            "no model: retrying once with relaxed initialisation settings".into(),
-        );
-        fresh_dir(&sparse)?;
-        // COLMAP refuses an option given twice, so the relaxed values replace
-        // the ones already in the argument list.
-        let a = override_args(a, &relaxed_init_args(&opts.mapper));
-        out = r.step("mapper", "mapper_relaxed", a)?;
-        models = read_models(&sparse)?;
-        init_retried = true;
-    }
+    let (out, mut models, init_retried) = steps.map(&mut r, &sparse)?;
     if models.is_empty() {
-        let cause = if no_init(&out) {
-            "COLMAP found no initial image pair"
-        } else {
-            "COLMAP built no model"
-        };
-        let retried = if init_retried {
-            ", also with relaxed initialisation settings"
-        } else {
-            ""
-        };
-        // The matcher's verdicts usually name the cause; the generic advice
-        // stands when the database cannot tell.
-        let mask_hint = if opts.use_masks {
-            " or `--no-masks`"
-        } else {
-            ""
-        };
-        let mut msg = match pairs.and_then(|s| s.cause().map(|d| (s, d))) {
-            Some((s, d)) => format!(
-                "{cause} from {} images{retried}: {d}{} (mapper log {})",
-                names.len(),
-                if s.verified == 0 && opts.use_masks {
-                    "; try `--no-masks`"
-                } else {
-                    ""
-                },
-                out.log.display()
-            ),
-            None => format!(
-                "{cause} from {} images{retried}: the frames have too little parallax or too few static features match; use more frames (a higher --fps or --pose-stride 1), more features, `--matcher exhaustive`{} (mapper log {})",
-                names.len(),
-                mask_hint,
-                out.log.display()
-            ),
-        };
-        if !out.success {
-            msg.push_str(&format!(
-                "; mapper {}: {}",
-                out.status,
-                log_tail(&out.log, 4)
-            ));
-        }
-        return Err(PoseError::NoModel(msg));
+        return Err(no_model_error(opts, &out, pairs, names.len(), init_retried));
     }
     require_success("mapper", &out)?;
     if no_parallax {
@@ -849,24 +691,11 @@ pub fn run_colmap_cancellable(
         .filter(|n| !registered_names.contains(n.as_str()))
         .cloned()
         .collect();
-
-    // 4. Undistortion, when the camera has distortion.
-    let mut undistorted_dir = None;
-    if opts.undistort && best.has_distortion {
-        let und = paths.work.join("undistorted");
-        fresh_dir(&und)?;
-        let mut a: Vec<String> = Vec::new();
-        a.extend(arg("image_path", path_str(&paths.images)));
-        a.extend(arg("input_path", path_str(&best_dir)));
-        a.extend(arg("output_path", path_str(&und)));
-        a.extend(arg("output_type", "COLMAP"));
-        let out = r.step("image_undistorter", "image_undistorter", a)?;
-        require_success("image_undistorter", &out)?;
-        let masks = opts.use_masks.then_some(paths.masks.as_path());
-        crate::undistort::install_undistorted(&und, &best_dir, masks, &paths.undistorted)?;
-        undistorted_dir = Some(paths.undistorted.clone());
-    }
-
+    let undistorted_dir = if opts.undistort && best.has_distortion {
+        Some(steps.undistort(&mut r, &best_dir)?)
+    } else {
+        None
+    };
     crate::model_info::install_model(&best_dir, &paths.out)?;
 
     Ok(ColmapReport {
@@ -893,4 +722,245 @@ pub fn run_colmap_cancellable(
         timings: r.timings,
         total_seconds: t0.elapsed().as_secs_f64(),
     })
+}
+
+/// The images the pose stage uses (every `stride`-th), at least two, with
+/// their masks checked when masks are used.
+fn selected_images(paths: &ColmapPaths, opts: &ColmapOptions) -> Result<Vec<String>> {
+    let all_names = list_images(&paths.images)?;
+    let names: Vec<String> = all_names.iter().step_by(opts.stride).cloned().collect();
+    if names.len() < 2 {
+        return Err(PoseError::Invalid(format!(
+            "{}: {} images{}; structure from motion needs at least 2",
+            paths.images.display(),
+            names.len(),
+            if opts.stride > 1 {
+                format!(" at stride {}", opts.stride)
+            } else {
+                String::new()
+            }
+        )));
+    }
+    if opts.use_masks {
+        check_masks(&paths.images, &paths.masks, &names)?;
+    }
+    Ok(names)
+}
+
+/// What every COLMAP step of one run shares: the scene's paths, the
+/// database and the seed argument.
+struct Steps<'a> {
+    paths: &'a ColmapPaths,
+    db: PathBuf,
+    seed: [String; 2],
+}
+
+impl Steps<'_> {
+    /// Make the database match the resume `decision`: a fresh one (its
+    /// resume state written first, so an interrupted extraction leaves a
+    /// database that matches it), the kept features without their matches,
+    /// or everything kept.
+    fn prepare_database(
+        &self,
+        r: &mut Runner,
+        decision: Decision,
+        state_path: &Path,
+        feature_key: &FeatureKey,
+    ) -> Result<()> {
+        match decision {
+            Decision::Fresh => {
+                remove_database(&self.db)?;
+                resume::save(
+                    state_path,
+                    &ResumeState {
+                        features: feature_key.clone(),
+                        matching: None,
+                    },
+                )
+            }
+            Decision::KeepFeatures => {
+                r.note(
+                    "database_cleaner",
+                    "matching settings changed: clearing the kept matches".into(),
+                );
+                let mut a: Vec<String> = Vec::new();
+                a.extend(arg("database_path", path_str(&self.db)));
+                a.extend(arg("type", "matches"));
+                let out = r.step("database_cleaner", "database_cleaner", a)?;
+                require_success("database_cleaner", &out)
+            }
+            Decision::KeepAll => {
+                r.note(
+                    "feature_extractor",
+                    format!(
+                        "resuming from the kept database {} (done images and pairs are skipped)",
+                        self.db.display()
+                    ),
+                );
+                Ok(())
+            }
+        }
+    }
+
+    /// Step 1, SIFT features of the images in `list` (masked pixels
+    /// ignored). Returns how many images the kept database already had.
+    fn extract_features(&self, r: &mut Runner, list: &Path) -> Result<usize> {
+        let opts = r.opts;
+        let mut a: Vec<String> = Vec::new();
+        a.extend(arg("database_path", path_str(&self.db)));
+        a.extend(arg("image_path", path_str(&self.paths.images)));
+        a.extend(arg("image_list_path", path_str(list)));
+        a.extend(arg("ImageReader.camera_model", opts.camera_model.name()));
+        a.extend(arg(
+            "ImageReader.single_camera",
+            u8::from(opts.single_camera),
+        ));
+        if opts.use_masks {
+            a.extend(arg("ImageReader.mask_path", path_str(&self.paths.masks)));
+        }
+        a.extend(arg("SiftExtraction.use_gpu", 0));
+        a.extend(arg("SiftExtraction.num_threads", opts.threads));
+        a.extend(arg("SiftExtraction.max_image_size", opts.max_image_size));
+        a.extend(arg(
+            "SiftExtraction.max_num_features",
+            opts.max_num_features,
+        ));
+        a.extend(self.seed.clone());
+        let out = r.step("feature_extractor", "feature_extractor", a)?;
+        require_success("feature_extractor", &out)?;
+        Ok(std::fs::read_to_string(&out.log)
+            .unwrap_or_default()
+            .lines()
+            .filter(|l| l.contains("SKIP: Features for image already extracted"))
+            .count())
+    }
+
+    /// Step 2, matching (sequential or exhaustive).
+    fn match_features(&self, r: &mut Runner) -> Result<()> {
+        let opts = r.opts;
+        let mut a: Vec<String> = Vec::new();
+        a.extend(arg("database_path", path_str(&self.db)));
+        a.extend(arg("SiftMatching.use_gpu", 0));
+        a.extend(arg("SiftMatching.num_threads", opts.threads));
+        if opts.matcher == Matcher::Sequential {
+            a.extend(arg("SequentialMatching.overlap", opts.overlap));
+            a.extend(arg(
+                "SequentialMatching.loop_detection",
+                u8::from(opts.loop_detection),
+            ));
+        }
+        a.extend(self.seed.clone());
+        let step = opts.matcher.step();
+        let out = r.step(step, step, a)?;
+        require_success(step, &out)
+    }
+
+    /// Step 3, mapping into `sparse`, retried once with relaxed
+    /// initialisation when no model comes out. Returns the last mapper run,
+    /// the models it wrote and whether it was the retry.
+    #[allow(clippy::type_complexity)]
+    fn map(
+        &self,
+        r: &mut Runner,
+        sparse: &Path,
+    ) -> Result<(
+        StepOutcome,
+        Vec<(crate::model_info::ModelInfo, PathBuf)>,
+        bool,
+    )> {
+        let opts = r.opts;
+        let mut a: Vec<String> = Vec::new();
+        a.extend(arg("database_path", path_str(&self.db)));
+        a.extend(arg("image_path", path_str(&self.paths.images)));
+        a.extend(arg("output_path", path_str(sparse)));
+        a.extend(arg("Mapper.num_threads", opts.threads));
+        a.extend(opts.mapper.args());
+        a.extend(self.seed.clone());
+        let out = r.step("mapper", "mapper", a.clone())?;
+        let models = read_models(sparse)?;
+        if !models.is_empty() || !opts.retry_init {
+            return Ok((out, models, false));
+        }
+        r.note(
+            "mapper",
+            "no model: retrying once with relaxed initialisation settings".into(),
+        );
+        fresh_dir(sparse)?;
+        // COLMAP refuses an option given twice, so the relaxed values replace
+        // the ones already in the argument list.
+        let a = override_args(a, &relaxed_init_args(&opts.mapper));
+        let out = r.step("mapper", "mapper_relaxed", a)?;
+        Ok((out, read_models(sparse)?, true))
+    }
+
+    /// Step 4, undistortion of the model in `model_dir` (its camera has
+    /// distortion), installed with its masks; returns where.
+    fn undistort(&self, r: &mut Runner, model_dir: &Path) -> Result<PathBuf> {
+        let und = self.paths.work.join("undistorted");
+        fresh_dir(&und)?;
+        let mut a: Vec<String> = Vec::new();
+        a.extend(arg("image_path", path_str(&self.paths.images)));
+        a.extend(arg("input_path", path_str(model_dir)));
+        a.extend(arg("output_path", path_str(&und)));
+        a.extend(arg("output_type", "COLMAP"));
+        let out = r.step("image_undistorter", "image_undistorter", a)?;
+        require_success("image_undistorter", &out)?;
+        let masks = r.opts.use_masks.then_some(self.paths.masks.as_path());
+        crate::undistort::install_undistorted(&und, model_dir, masks, &self.paths.undistorted)?;
+        Ok(self.paths.undistorted.clone())
+    }
+}
+
+/// The error when the mapper built no model from `images` images: the cause
+/// from the matcher's verdicts (`pairs`) when they tell, else generic
+/// advice, and the mapper's log.
+fn no_model_error(
+    opts: &ColmapOptions,
+    out: &StepOutcome,
+    pairs: Option<crate::pairs::PairStats>,
+    images: usize,
+    init_retried: bool,
+) -> PoseError {
+    let no_init = std::fs::read_to_string(&out.log)
+        .unwrap_or_default()
+        .contains("No good initial image pair found");
+    let cause = if no_init {
+        "COLMAP found no initial image pair"
+    } else {
+        "COLMAP built no model"
+    };
+    let retried = if init_retried {
+        ", also with relaxed initialisation settings"
+    } else {
+        ""
+    };
+    let mask_hint = if opts.use_masks {
+        " or `--no-masks`"
+    } else {
+        ""
+    };
+    let mut msg = match pairs.and_then(|s| s.cause().map(|d| (s, d))) {
+        Some((s, d)) => format!(
+            "{cause} from {images} images{retried}: {d}{} (mapper log {})",
+            if s.verified == 0 && opts.use_masks {
+                "; try `--no-masks`"
+            } else {
+                ""
+            },
+            out.log.display()
+        ),
+        None => format!(
+            "{cause} from {images} images{retried}: the frames have too little parallax or too few static features match; use more frames (a higher --fps or --pose-stride 1), more features, `--matcher exhaustive`{} (mapper log {})",
+            mask_hint,
+            out.log.display()
+        ),
+    };
+    if !out.success {
+        msg.push_str(&format!(
+            "; mapper {}: {}",
+            out.status,
+            log_tail(&out.log, 4)
+        ));
+    }
+    PoseError::NoModel(msg)
 }

@@ -119,31 +119,26 @@ mod tests {
     #[test]
     fn parses_captured_colmap_lines() {
         let c = |unit, done, total| Some(Count { unit, done, total });
-        assert_eq!(
-            parse_line("Processed file [12/30]"),
-            c(Unit::Extracted, 12, Some(30))
-        );
-        assert_eq!(
-            parse_line("Matching image [11/30] in 2.123s"),
-            c(Unit::Matched, 11, Some(30))
-        );
-        // A killed matcher leaves a line without its timing.
-        assert_eq!(
-            parse_line("Matching image [11/30]"),
-            c(Unit::Matched, 11, Some(30))
-        );
-        assert_eq!(
-            parse_line("Matching block [2/3, 1/3] in 4.5s"),
-            c(Unit::Blocks, 4, Some(9))
-        );
-        assert_eq!(
-            parse_line("Registering image #18 (3)"),
-            c(Unit::Registered, 3, None)
-        );
-        assert_eq!(
-            parse_line("  Undistorting image [4/30]"),
-            c(Unit::Undistorted, 4, Some(30))
-        );
+        for (line, want) in [
+            ("Processed file [12/30]", c(Unit::Extracted, 12, Some(30))),
+            (
+                "Matching image [11/30] in 2.123s",
+                c(Unit::Matched, 11, Some(30)),
+            ),
+            // A killed matcher leaves a line without its timing.
+            ("Matching image [11/30]", c(Unit::Matched, 11, Some(30))),
+            (
+                "Matching block [2/3, 1/3] in 4.5s",
+                c(Unit::Blocks, 4, Some(9)),
+            ),
+            ("Registering image #18 (3)", c(Unit::Registered, 3, None)),
+            (
+                "  Undistorting image [4/30]",
+                c(Unit::Undistorted, 4, Some(30)),
+            ),
+        ] {
+            assert_eq!(parse_line(line), want, "{line:?}");
+        }
     }
 
     #[test]

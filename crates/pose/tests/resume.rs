@@ -16,20 +16,8 @@ use pose::{MapperOptions, PoseError};
 use std::path::{Path, PathBuf};
 use std::sync::atomic::{AtomicBool, Ordering};
 
-fn colmap_available() -> bool {
-    let ok = std::process::Command::new("colmap")
-        .arg("-h")
-        .output()
-        .is_ok_and(|o| String::from_utf8_lossy(&o.stdout).contains("COLMAP"));
-    if !ok {
-        assert!(
-            std::env::var_os("CI").is_none(),
-            "CI is set but `colmap` cannot be run: apt-get install -y colmap"
-        );
-        eprintln!("colmap not found: skipping (set CI to make this a failure)");
-    }
-    ok
-}
+mod common;
+use common::colmap_available;
 
 /// The first `n` frames of the small scene in `dir/images`.
 fn small_frames(dir: &Path, n: usize) -> PathBuf {
