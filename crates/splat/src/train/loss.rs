@@ -147,24 +147,32 @@ fn ssim_channel_grad(
     (total, grad)
 }
 
+/// A smooth `w×h` RGB test image (a sinusoid, shifted by `phase`) with a
+/// deterministic `noise` texture of that amplitude.
+#[cfg(test)]
+pub(crate) fn test_image(w: usize, h: usize, phase: f64, noise: f64) -> Vec<f32> {
+    let mut v = vec![];
+    for y in 0..h {
+        for x in 0..w {
+            for c in 0..3 {
+                v.push(
+                    (0.5 + 0.4 * (0.37 * x as f64 + 0.23 * y as f64 + c as f64 + phase).sin()
+                        + noise * ((x * 7 + y * 13 + c * 5) % 11) as f64 / 11.0)
+                        as f32,
+                );
+            }
+        }
+    }
+    v
+}
+
 #[cfg(test)]
 mod tests {
     #![allow(clippy::unwrap_used, clippy::expect_used)]
     use super::*;
 
     fn img(w: usize, h: usize, phase: f64) -> Vec<f32> {
-        let mut v = vec![];
-        for y in 0..h {
-            for x in 0..w {
-                for c in 0..3 {
-                    v.push(
-                        (0.5 + 0.4 * (0.37 * x as f64 + 0.23 * y as f64 + c as f64 + phase).sin())
-                            as f32,
-                    );
-                }
-            }
-        }
-        v
+        test_image(w, h, phase, 0.0)
     }
 
     #[test]
