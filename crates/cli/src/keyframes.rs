@@ -163,7 +163,7 @@ pub fn select(
             });
         }
     }
-    let dis = Dis::new(DisOptions::default());
+    let dis = Dis::new(DisOptions::opencv_medium());
     let (w, h) = frames.first().map_or((0, 0), |f| (f.w, f.h));
     let threshold = opts.min_parallax * ((w * w + h * h) as f64).sqrt();
     let mut last: Option<usize> = None;

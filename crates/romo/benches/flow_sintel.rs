@@ -11,7 +11,7 @@
 //!
 //! Environment: `REPS` (default 5), `PAIRS` (comma-separated name
 //! prefixes), `PRESET=large` (`DisOptions::large_motion()`), `DIS_OPTS` (a
-//! partial `DisOptions` JSON), `OPENCV=0` (skip OpenCV), `DUMP_DIR` (write
+//! partial `DisOptions` JSON over the mask stage's preset), `OPENCV=0` (skip OpenCV), `DUMP_DIR` (write
 //! our `.flo` files), `SIMD=baseline` (run our kernels' baseline x86-64
 //! copies even on an AVX2 CPU; `simd` in the JSON says which ran),
 //! `SIMD=both` (each repetition also runs the baseline copies right before
@@ -227,10 +227,16 @@ fn main() {
         .unwrap_or(5)
         .max(1);
     let opts: DisOptions = match std::env::var("DIS_OPTS") {
-        Ok(s) => serde_json::from_str(&s).unwrap(),
+        Ok(s) => match serde_json::from_str(&s) {
+            Ok(o) => o,
+            Err(e) => {
+                eprintln!("DIS_OPTS: not a DisOptions JSON ({e})");
+                std::process::exit(2);
+            }
+        },
         Err(_) if std::env::var("PRESET").as_deref() == Ok("large") => DisOptions::large_motion(),
         Err(_) if std::env::var("PRESET").as_deref() == Ok("masks") => DisOptions::masks(),
-        Err(_) => Default::default(),
+        Err(_) => DisOptions::opencv_medium(),
     };
     let filter: Vec<String> = std::env::var("PAIRS")
         .map(|s| s.split(',').map(String::from).collect())

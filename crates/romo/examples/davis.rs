@@ -1,51 +1,52 @@
 //! Measurement (not a test): RoMo on the DAVIS-2016 sequences in
-//! `$DAVIS_DIR` (required), masks into
-//! `$OUT` (default /tmp/romo_davis), J / precision / recall per sequence as
-//! JSON. Options may be overridden with a partial JSON `RomoOptions` in
-//! `$ROMO_OPTS`; `$SEQS` restricts to a comma-separated list.
-#![allow(clippy::unwrap_used, clippy::expect_used)]
+//! `$DAVIS_DIR` (default `../shared/data/davis2016` beside the repository),
+//! masks into `$OUT` (default `romo_davis` in the temporary folder), J /
+//! precision / recall per sequence as JSON. Options may be overridden with
+//! a partial JSON `RomoOptions` in `$ROMO_OPTS`; `$SEQS` restricts to a
+//! comma-separated list.
 use std::path::PathBuf;
-fn main() {
-    let Some(davis) = std::env::var_os("DAVIS_DIR").map(PathBuf::from) else {
-        eprintln!("set DAVIS_DIR to the DAVIS-2016 folder (JPEGImages/480p, Annotations/480p)");
-        std::process::exit(2);
-    };
-    let out = PathBuf::from(std::env::var("OUT").unwrap_or("/tmp/romo_davis".into()));
-    let opts: romo::RomoOptions =
-        serde_json::from_str(&std::env::var("ROMO_OPTS").unwrap_or("{}".into())).unwrap();
-    let only: Option<Vec<String>> = std::env::var("SEQS")
-        .ok()
-        .map(|s| s.split(',').map(String::from).collect());
+
+mod common;
+use common::Res;
+
+fn main() -> std::process::ExitCode {
+    common::main("davis", run)
+}
+
+/// The files of `dir`, sorted by name.
+fn sorted_entries(dir: &std::path::Path) -> Res<Vec<PathBuf>> {
+    let mut v = std::fs::read_dir(dir)
+        .map_err(|e| format!("{}: {e}", dir.display()))?
+        .map(|e| e.map(|e| e.path()))
+        .collect::<std::io::Result<Vec<_>>>()?;
+    v.sort();
+    Ok(v)
+}
+
+fn run() -> Res<()> {
+    let davis = common::davis_dir();
+    let out = std::env::var_os("OUT")
+        .map_or_else(|| std::env::temp_dir().join("romo_davis"), PathBuf::from);
+    let opts = common::romo_options()?;
+    let only = common::sequences();
     let mut rows = vec![];
     let mut js = vec![];
     let imgs = davis.join("JPEGImages/480p");
-    let mut seqs: Vec<_> = std::fs::read_dir(&imgs)
-        .unwrap()
-        .map(|e| e.unwrap().file_name().into_string().unwrap())
-        .collect();
-    seqs.sort();
-    for s in seqs {
+    for dir in sorted_entries(&imgs)? {
+        let s = common::file_name(&dir);
         if only.as_ref().is_some_and(|o| !o.contains(&s)) {
             continue;
         }
-        let mut paths: Vec<PathBuf> = std::fs::read_dir(imgs.join(&s))
-            .unwrap()
-            .map(|e| e.unwrap().path())
-            .collect();
-        paths.sort();
-        let names: Vec<String> = paths
-            .iter()
-            .map(|p| p.file_name().unwrap().to_string_lossy().into_owned())
-            .collect();
+        let paths = sorted_entries(&dir)?;
+        let names: Vec<String> = paths.iter().map(|p| common::file_name(p)).collect();
         let t = std::time::Instant::now();
-        let rep = romo::segment_paths(&paths, &names, &out.join(&s), &opts, &|_, _, _| {}).unwrap();
+        let rep = romo::segment_paths(&paths, &names, &out.join(&s), &opts, &|_, _, _| {})?;
         let secs = t.elapsed().as_secs_f64();
         let m = romo::metrics::evaluate_sequence(
             &out.join(&s).join("masks"),
             &davis.join("Annotations/480p").join(&s),
             &s,
-        )
-        .unwrap();
+        )?;
         let mean = |f: &dyn Fn(&romo::FrameReport) -> f32| {
             rep.frames.iter().map(|x| f(x) as f64).sum::<f64>() / rep.frames.len() as f64
         };
@@ -75,7 +76,7 @@ fn main() {
         "{}",
         serde_json::to_string_pretty(
             &serde_json::json!({"mean_j": mj, "options": opts, "sequences": rows})
-        )
-        .unwrap()
+        )?
     );
+    Ok(())
 }

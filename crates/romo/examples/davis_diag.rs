@@ -3,14 +3,14 @@
 //! (U precision) and how much of the object it covers (U recall), how much
 //! of L lies inside the object (L error), the MLP output on the grid
 //! (J / precision / recall at the threshold) and after refinement to full
-//! resolution. Env as in the `davis` example (`DAVIS_DIR`, `ROMO_OPTS`,
-//! `SEQS`), plus `MAXF` (first N frames only), `DUMP` (a folder for
-//! frame | U/L | probability | truth images) and `ORACLE=1` (train on the
-//! ground truth as U/L: what the features and MLP can do with perfect
-//! labels). Any folder with `JPEGImages/480p/<seq>/` and
-//! `Annotations/480p/<seq>/` (255 = moving) works, e.g. a generated scene's
-//! `images/` and `gt_motion/` linked in.
-#![allow(clippy::unwrap_used, clippy::expect_used)]
+//! resolution. Env as in the `davis` example (`DAVIS_DIR`, default
+//! `../shared/data/davis2016` beside the repository; `ROMO_OPTS`; `SEQS`),
+//! plus `MAXF` (first N frames only) and `DUMP` (a folder for
+//! frame | U/L | probability | truth images). Any folder with
+//! `JPEGImages/480p/<seq>/` and `Annotations/480p/<seq>/` (255 = moving)
+//! works, e.g. a generated scene's `images/` and `gt_motion/` linked in.
+mod common;
+use common::Res;
 use romo::plane::{Plane, Rgb};
 use std::path::PathBuf;
 
@@ -51,66 +51,52 @@ impl Counts {
     }
 }
 
-fn main() {
-    let Some(davis) = std::env::var_os("DAVIS_DIR").map(PathBuf::from) else {
-        eprintln!("set DAVIS_DIR to the DAVIS-2016 folder (JPEGImages/480p, Annotations/480p)");
-        std::process::exit(2);
+fn main() -> std::process::ExitCode {
+    common::main("davis_diag", run)
+}
+
+fn run() -> Res<()> {
+    let davis = common::davis_dir();
+    let opts = common::romo_options()?;
+    let only = common::sequences();
+    let maxf: usize = match std::env::var("MAXF") {
+        Ok(s) => s.parse().map_err(|e| format!("MAXF={s}: {e}"))?,
+        Err(_) => usize::MAX,
     };
-    let opts: romo::RomoOptions =
-        serde_json::from_str(&std::env::var("ROMO_OPTS").unwrap_or("{}".into())).unwrap();
-    let only: Option<Vec<String>> = std::env::var("SEQS")
-        .ok()
-        .map(|s| s.split(',').map(String::from).collect());
-    let maxf: usize = std::env::var("MAXF")
-        .ok()
-        .and_then(|s| s.parse().ok())
-        .unwrap_or(usize::MAX);
-    let data = loader::davis::Davis::open(&davis, "480p").unwrap();
+    let data = loader::davis::Davis::open(&davis, "480p")
+        .map_err(|e| format!("{}: {e}", davis.display()))?;
     let mut sums = [0.0f64; 4];
     let mut k = 0.0;
-    for s in data.sequences().unwrap() {
+    for s in data.sequences()? {
         if only.as_ref().is_some_and(|o| !o.contains(&s)) {
             continue;
         }
-        let mut frames = data.sequence(&s).unwrap().frames;
+        let mut frames = data.sequence(&s)?.frames;
         frames.truncate(maxf);
         let paths: Vec<PathBuf> = frames.iter().map(|f| f.image.clone()).collect();
         let src = romo::scene::PathSource {
             paths: paths.clone(),
         };
-        let fx = romo::scene::make_extractor(&opts).unwrap();
+        let fx = romo::scene::make_extractor(&opts)?;
         let flow = romo::flow::dis::Dis::new(opts.flow.clone());
         let t = std::time::Instant::now();
         // The ground truth (0 / 1) of every frame, at full resolution.
         let gts: Vec<Plane> = frames
             .iter()
-            .map(|f| {
-                let g = loader::io::read_gray8(f.annotation.as_ref().unwrap()).unwrap();
-                Plane {
+            .map(|f| -> Res<Plane> {
+                let a = f
+                    .annotation
+                    .as_ref()
+                    .ok_or_else(|| format!("{s}/{}: no annotation", f.name))?;
+                let g = loader::io::read_gray8(a)?;
+                Ok(Plane {
                     w: g.width() as usize,
                     h: g.height() as usize,
                     data: g.as_raw().iter().map(|v| (*v > 127) as u8 as f32).collect(),
-                }
+                })
             })
-            .collect();
-        // ORACLE=1: ground-truth U/L instead of the geometric labels.
-        let oracle = std::env::var("ORACLE").is_ok();
-        let hook = |t: usize, (gw, gh): (usize, usize), fl: &mut romo::labels::FrameLabels| {
-            let g = gts[t].resize(gw, gh);
-            for (i, v) in g.data.iter().enumerate() {
-                fl.u[i] = *v > 0.5;
-                fl.l[i] = *v < 0.5;
-            }
-        };
-        let seg = romo::pipeline::segment_frames_with_labels(
-            &src,
-            &opts,
-            &flow,
-            fx.as_ref(),
-            &|_, _, _| {},
-            oracle.then_some(&hook as romo::pipeline::LabelHook),
-        )
-        .unwrap();
+            .collect::<Res<_>>()?;
+        let seg = romo::segment_frames(&src, &opts, &flow, fx.as_ref(), &|_, _, _| {})?;
         let secs = t.elapsed().as_secs_f64();
         let (gw, gh) = seg.report.grid;
         let (mut uc, mut lc, mut gc, mut fc) = (
@@ -154,7 +140,7 @@ fn main() {
                     &gt_grid,
                 );
             }
-            let frame = Rgb::from_image(&loader::io::read_rgb32f(p).unwrap());
+            let frame = Rgb::from_image(&loader::io::read_rgb32f(p)?);
             if let Ok(d) = std::env::var("DUMP")
                 && i % 10 == 0
             {
@@ -175,8 +161,8 @@ fn main() {
                         _ => image::Rgb([255 * gt_grid[j] as u8; 3]),
                     }
                 });
-                let _ = std::fs::create_dir_all(&d);
-                img.save(format!("{d}/{s}_{i:03}.png")).unwrap();
+                std::fs::create_dir_all(&d)?;
+                img.save(format!("{d}/{s}_{i:03}.png"))?;
             }
             let full = romo::refine::upsample_probability(&seg.probs[i], &frame, &opts.refine);
             fc.add(
@@ -224,4 +210,5 @@ fn main() {
         sums[2] / k,
         sums[3] / k
     );
+    Ok(())
 }

@@ -30,17 +30,21 @@ use serde::{Deserialize, Serialize};
 
 /// Options of the labelling stages.
 #[derive(Debug, Clone, Serialize, Deserialize)]
+#[cfg_attr(feature = "cli", derive(clap::Args))]
 #[serde(default)]
 pub struct LabelOptions {
     /// Cycle check (Sundaram et al. 2010): a correspondence survives when
     /// `|f + b|² < cycle_rel·(|f|² + |b|²) + cycle_abs_px²` (default 0.01).
+    #[cfg_attr(feature = "cli", arg(skip))]
     pub cycle_rel: f32,
     /// Absolute part of the cycle threshold in grid px (default 0.5 px).
+    #[cfg_attr(feature = "cli", arg(skip))]
     pub cycle_abs_px: f32,
     /// U threshold factor on v (default 1.0; the paper's 2 assumes px²).
     /// With S in px, 2·v left U empty on DAVIS (0.0% coverage, mean J
     /// 0.17 on blackswan + car-roundabout); 1.0 gave U ≈ 7–15% and the best
     /// J of {1.0, 1.5, 2.0} on four DAVIS sequences.
+    #[cfg_attr(feature = "cli", arg(skip))]
     pub u_factor: f32,
     /// L threshold factor on v (default 0.1; the paper's 0.01 assumes
     /// px²: with px it keeps ~0.5% of pixels). Measured on DAVIS (8
@@ -54,13 +58,16 @@ pub struct LabelOptions {
     /// 0.82 → 0.56), 0.05 → 0.569; demo scene (seeds 0 / 1 / 2) 0.15 →
     /// 0.767 mean, 0.12 → 0.773, 0.1 → 0.784, 0.08 → 0.785; small test scene
     /// 0.590 → 0.718 at 0.1. Hence 0.1.
+    #[cfg_attr(feature = "cli", arg(skip))]
     pub l_factor: f32,
     /// Frames whose inlier ratio is below this are not used to train the
     /// MLP (paper: 0.5). Inlier: residual below `inlier_sigmas`·σ̂ of the
     /// pair's robust fit.
+    #[cfg_attr(feature = "cli", arg(skip))]
     pub min_inlier_ratio: f32,
     /// Correspondences (spread on a grid) used to fit each pair's model; the
     /// residuals are then evaluated on all (default 2000).
+    #[cfg_attr(feature = "cli", arg(skip))]
     pub fit_points: usize,
     /// F-informative override (ours) of the F-vs-H selection: when the
     /// selection rule picks the homography but the fundamental matrix still
@@ -69,8 +76,9 @@ pub struct LabelOptions {
     /// following it: car-roundabout, scooter-black) it calls almost nothing
     /// moving (< 0.5% of points); when it does separate something, that is
     /// the object at higher precision than H's residual, and H's extra U
-    /// is static parallax (parkour, breakdance). 0 disables. Default: see
-    /// README.
+    /// is static parallax (parkour, breakdance). 0 disables (default
+    /// 0.005).
+    #[cfg_attr(feature = "cli", arg(long, required = false))]
     pub f_informative_fraction: f32,
     /// U propagation along the flow (ours): U is spread this many frames
     /// forward and backward along cycle-consistent flow (a pixel becomes U
@@ -78,26 +86,33 @@ pub struct LabelOptions {
     /// from L there. Objects whose motion is visible to the epipolar test
     /// only in some frames (the demo's pedestrians walking along epipolar
     /// lines) then keep U, and lose the wrong L, in the frames between.
-    /// 0 disables. Default: see README.
+    /// 0 disables (default 0: the graph cut's temporal edges carry
+    /// objects between frames).
+    #[cfg_attr(feature = "cli", arg(long, required = false))]
     pub u_propagation_frames: usize,
     /// Cheirality test (ours): in pairs scored by F, a correspondence whose
     /// triangulation lies behind either camera is scored by its parallax
     /// when that exceeds its Sampson distance (see
     /// [`crate::geometry::oriented`]; needs a focal length, from the scene
-    /// or guessed). Default: see README.
+    /// or guessed). Default true; `--no-cheirality` turns it off.
+    #[cfg_attr(feature = "cli", arg(long = "no-cheirality", action = clap::ArgAction::SetFalse, help = "Turn off the cheirality test (flow along the epipolar line that only a point behind the cameras could make counts as motion)"))]
     pub cheirality: bool,
     /// Three-view depth consistency (ours; see [`three_view_residuals`]):
     /// in frames whose two pairs both have a decided metric geometry (F
     /// pairs with the cheirality test on), an unlabelled pixel whose
     /// forward and backward depths disagree by more than
     /// `three_view_u_px` becomes U, and an L pixel whose depths disagree by
-    /// more than `three_view_l_px` leaves L. Default: see README.
+    /// more than `three_view_l_px` leaves L. Default true; `--no-three-view`
+    /// turns it off.
+    #[cfg_attr(feature = "cli", arg(long = "no-three-view", action = clap::ArgAction::SetFalse, help = "Turn off the three-view depth-consistency test (a pixel whose depths from its forward and backward pairs disagree is moving)"))]
     pub three_view: bool,
     /// U threshold of the three-view residual, working-grid px (default
     /// 0.5).
+    #[cfg_attr(feature = "cli", arg(skip))]
     pub three_view_u_px: f32,
     /// L-removal threshold of the three-view residual, working-grid px
     /// (default 1.0).
+    #[cfg_attr(feature = "cli", arg(skip))]
     pub three_view_l_px: f32,
     /// Local U threshold (ours): a pixel is U when `S > u·min(v, max(m,
     /// local_u_floor·v))`, `m` its own flow magnitude (mean over its valid
@@ -106,6 +121,7 @@ pub struct LabelOptions {
     /// (it stays still in the image while the background streams past) the
     /// object's residual is about the background's flow, i.e. about v, and
     /// `S > u·v` splits it at random. 0 = off (the paper's global rule).
+    #[cfg_attr(feature = "cli", arg(skip))]
     pub local_u_floor: f32,
     /// U needs texture (ours): a pixel whose grey gradient on the working
     /// grid (central differences, intensity in [0, 1] per grid px) is below
@@ -113,17 +129,21 @@ pub struct LabelOptions {
     /// surroundings (DIS's propagation, the variational smoothness), so its
     /// residual is no evidence of its own motion: in a textureless sky next
     /// to a moving edge it is large. 0 = off.
+    #[cfg_attr(feature = "cli", arg(skip))]
     pub u_min_gradient: f32,
     /// A frame with fewer than this fraction of textured pixels (gradient
     /// above [`crate::pipeline::TEXTURE_GRADIENT`]) is not used in any pair:
     /// its flow is meaningless (default 0.01).
+    #[cfg_attr(feature = "cli", arg(skip))]
     pub min_texture_fraction: f32,
     /// A pair whose forward or backward flow is cycle-consistent and
     /// photo-consistent (grey levels within
     /// [`crate::pipeline::PHOTO_TOLERANCE`]) on less than this fraction of
     /// pixels is skipped (default 0.05).
+    #[cfg_attr(feature = "cli", arg(skip))]
     pub min_valid_fraction: f32,
     /// Robust estimation and model selection.
+    #[cfg_attr(feature = "cli", command(flatten))]
     pub robust: RobustOptions,
 }
 

@@ -7,6 +7,8 @@
 //! robust epipolar [`geometry`] → Sampson-based U/L labels → per-pixel
 //! features → a tiny MLP → refinement to full resolution → masks.
 
+#[cfg(feature = "cli")]
+pub mod cli;
 pub mod error;
 pub mod features;
 pub mod flow;

@@ -48,22 +48,32 @@ pub enum ObjectMethod {
 
 /// Options of the object refinement.
 #[derive(Debug, Clone, Serialize, Deserialize)]
+#[cfg_attr(feature = "cli", derive(clap::Args))]
 #[serde(default)]
 pub struct ObjectOptions {
-    /// Method (default: graph cut).
+    /// Object-level refinement: graph-cut (one minimum cut over all frames
+    /// from the geometric evidence, the MLP, a colour model, image contrast
+    /// and the flow; default) or off.
+    #[cfg_attr(feature = "cli", arg(long = "objects", value_enum, required = false))]
     pub method: ObjectMethod,
     /// Weight `w_g` of the geometric evidence (default 1).
+    #[cfg_attr(feature = "cli", arg(skip))]
     pub geometry_weight: f32,
     /// Weight `w_m` of the MLP's probability (default 1).
+    #[cfg_attr(feature = "cli", arg(skip))]
     pub mlp_weight: f32,
     /// Weight `w_c` of the colour model (default 0.5).
+    #[cfg_attr(feature = "cli", arg(skip))]
     pub colour_weight: f32,
     /// Weight `λ_s` of the contrast-sensitive spatial smoothness (default 1).
+    #[cfg_attr(feature = "cli", arg(skip))]
     pub smoothness: f32,
     /// Weight `λ_t` of the edges along the flow between frames (default 1).
+    #[cfg_attr(feature = "cli", arg(skip))]
     pub temporal: f32,
     /// Grey gradient (intensity in [0, 1] per grid px) above which a pixel's
     /// residual counts as geometric evidence (default 0.02).
+    #[cfg_attr(feature = "cli", arg(skip))]
     pub texture_gradient: f32,
 }
 

@@ -41,76 +41,114 @@ pub enum FeatureBackend {
     },
 }
 
+impl FeatureBackend {
+    /// `--onnx-features MODEL`: the ONNX encoder at `model`.
+    pub fn parse_onnx(model: &str) -> std::result::Result<Self, std::convert::Infallible> {
+        Ok(Self::Onnx {
+            model: model.into(),
+        })
+    }
+}
+
 /// Which optical-flow estimator the pipeline uses.
 #[derive(Debug, Clone, PartialEq, Serialize, Deserialize, Default)]
-#[serde(rename_all = "snake_case")]
+#[serde(rename_all = "snake_case", deny_unknown_fields)]
 pub enum FlowBackend {
     /// The built-in DIS (`RomoOptions::flow`; default).
     #[default]
     Dis,
     /// A RAFT-style ONNX model (needs feature `onnx`; signature in
-    /// [`crate::onnx`]).
+    /// [`crate::onnx`]; input scale `RomoOptions::onnx_flow_scale`).
     Onnx {
         /// Path of the `.onnx` model.
         model: PathBuf,
-        /// Pixel values [0, 1] × this go into the model (1; 255 for RAFT
-        /// exports that take 0–255).
-        #[serde(default = "one")]
-        input_scale: f32,
     },
 }
 
-fn one() -> f32 {
-    1.0
+impl FlowBackend {
+    /// `--onnx-flow MODEL`: the ONNX flow model at `model`.
+    pub fn parse_onnx(model: &str) -> std::result::Result<Self, std::convert::Infallible> {
+        Ok(Self::Onnx {
+            model: model.into(),
+        })
+    }
 }
 
 /// All RoMo options. `Default` gives the paper's settings where the paper
 /// states them (see each sub-struct).
 #[derive(Debug, Clone, Serialize, Deserialize)]
+#[cfg_attr(feature = "cli", derive(clap::Args))]
 #[serde(default)]
 pub struct RomoOptions {
     /// Long side of the working grid in px (default 256).
+    #[cfg_attr(feature = "cli", arg(long, required = false))]
     pub grid_max_side: usize,
     /// Flow is computed on frames of `flow_scale` × the grid (default 2).
+    #[cfg_attr(feature = "cli", arg(long, required = false))]
     pub flow_scale: usize,
     /// Built-in flow parameters (DIS; default [`DisOptions::masks`], finer
-    /// than OpenCV's MEDIUM). A partial `flow` object in JSON overrides
-    /// fields of that preset, not of `DisOptions::default()`.
-    #[serde(deserialize_with = "flow_over_mask_preset")]
+    /// than OpenCV's MEDIUM, which is `DisOptions::default()`: a partial
+    /// `flow` object in JSON overrides fields of that preset).
+    #[cfg_attr(feature = "cli", arg(skip))]
     pub flow: DisOptions,
-    /// Flow estimator (default: the built-in DIS).
+    /// Flow estimator (default: the built-in DIS). `--onnx-flow MODEL`: an
+    /// ONNX optical-flow model instead, two [1, 3, H, W] RGB images in, a
+    /// [1, 2, h, w] flow (or [1, 4, h, w]: forward, then backward) out, e.g.
+    /// GMFlow from `scripts/export_gmflow_onnx.py`; frames are padded (or
+    /// shrunk) to its fixed input size. Needs a build with `--features
+    /// onnx` and ORT_DYLIB_PATH.
+    #[cfg_attr(feature = "cli", arg(long = "onnx-flow", value_name = "MODEL", value_parser = FlowBackend::parse_onnx, required = false))]
     pub flow_backend: FlowBackend,
+    /// Pixel values in [0, 1] are multiplied by this for an ONNX flow model
+    /// (default 1; 255 for RAFT exports that take 0–255).
+    #[cfg_attr(feature = "cli", arg(long, required = false))]
+    pub onnx_flow_scale: f32,
     /// Cycle check, robust geometry and U/L thresholds.
+    #[cfg_attr(feature = "cli", command(flatten))]
     pub labels: LabelOptions,
     /// MLP training.
+    #[cfg_attr(feature = "cli", arg(skip))]
     pub mlp: MlpOptions,
     /// Rounds of (fit → label → train) (paper: 2).
+    #[cfg_attr(feature = "cli", arg(long, required = false))]
     pub iterations: usize,
     /// Refinement to full resolution.
+    #[cfg_attr(feature = "cli", command(flatten))]
     pub refine: RefineOptions,
     /// Region completion over flow segments (ours; part of refinement).
+    #[cfg_attr(feature = "cli", command(flatten))]
     pub regions: RegionOptions,
-    /// Feature extractor.
+    /// Feature extractor (default: the built-in descriptor).
+    /// `--onnx-features MODEL`: an ONNX encoder (XFeat layout), concatenated
+    /// with the built-in features; needs a build with `--features onnx` and
+    /// ORT_DYLIB_PATH.
+    #[cfg_attr(feature = "cli", arg(long = "onnx-features", value_name = "MODEL", value_parser = FeatureBackend::parse_onnx, required = false))]
     pub features: FeatureBackend,
     /// The built-in descriptor with its two chromaticity channels (ours;
     /// see `HandFeatures`; default true). DAVIS 8 sequences, mean J: 0.489
     /// without → 0.510 with (seed 1: 0.521); also tried and not kept:
     /// larger-scale texture energy (0.488; with chromaticity 0.515 but the
     /// demo scene fell 0.60 → 0.51).
+    #[cfg_attr(feature = "cli", arg(long = "no-chromaticity", action = clap::ArgAction::SetFalse, help = "Leave the two chromaticity channels out of the built-in features"))]
     pub chromaticity_features: bool,
     /// Focal length of the frames divided by their width, for the
     /// cheirality test (`labels.cheirality`). None: the scene's intrinsics
     /// when segmenting a scene folder, else COLMAP's prior 1.2 × the long
     /// side. Only depth signs are read from it, which a rough value gets
     /// right.
+    #[cfg_attr(feature = "cli", arg(long))]
     pub focal_ratio: Option<f64>,
-    /// Master seed (sub-stages derive theirs from it).
+    /// Master seed (default 0; sub-stages derive theirs from it).
+    #[cfg_attr(feature = "cli", arg(long, required = false))]
     pub seed: u64,
     /// Output folder for `masks/` etc. (default: the scene folder).
+    #[cfg_attr(feature = "cli", arg(long))]
     pub out: Option<PathBuf>,
     /// Also write `probabilities/<stem>.exr` (moving probability, full res).
+    #[cfg_attr(feature = "cli", arg(long))]
     pub save_probabilities: bool,
     /// Also write `motion/<name>.png` overlays for looking at.
+    #[cfg_attr(feature = "cli", arg(long))]
     pub overlays: bool,
 }
 
@@ -121,6 +159,7 @@ impl Default for RomoOptions {
             flow_scale: 2,
             flow: DisOptions::masks(),
             flow_backend: FlowBackend::Dis,
+            onnx_flow_scale: 1.0,
             labels: LabelOptions::default(),
             mlp: MlpOptions::default(),
             iterations: 2,
@@ -137,34 +176,6 @@ impl Default for RomoOptions {
     }
 }
 
-/// Deserialise a (partial) `flow` object over [`DisOptions::masks`]:
-/// serde's own defaulting would fill the missing fields from
-/// `DisOptions::default()` (OpenCV's MEDIUM) and silently drop the preset.
-fn flow_over_mask_preset<'de, D: serde::Deserializer<'de>>(
-    d: D,
-) -> std::result::Result<DisOptions, D::Error> {
-    use serde::de::Error;
-    fn merge(base: &mut serde_json::Value, patch: serde_json::Value) {
-        match (base, patch) {
-            (serde_json::Value::Object(b), serde_json::Value::Object(p)) => {
-                for (k, v) in p {
-                    match b.get_mut(&k) {
-                        Some(slot) => merge(slot, v),
-                        None => {
-                            b.insert(k, v);
-                        }
-                    }
-                }
-            }
-            (slot, v) => *slot = v,
-        }
-    }
-    let patch = serde_json::Value::deserialize(d)?;
-    let mut base = serde_json::to_value(DisOptions::masks()).map_err(D::Error::custom)?;
-    merge(&mut base, patch);
-    serde_json::from_value(base).map_err(D::Error::custom)
-}
-
 impl RomoOptions {
     /// Check every option.
     pub fn validate(&self) -> Result<()> {
@@ -178,6 +189,11 @@ impl RomoOptions {
             .is_some_and(|r| !(r.is_finite() && r > 0.0))
         {
             return Err(RomoError::Options("romo: focal_ratio must be > 0".into()));
+        }
+        if !(self.onnx_flow_scale.is_finite() && self.onnx_flow_scale > 0.0) {
+            return Err(RomoError::Options(
+                "romo: onnx_flow_scale must be > 0".into(),
+            ));
         }
         self.flow.validate()?;
         self.labels.validate()?;
@@ -374,6 +390,121 @@ pub fn texture_fraction(g: &Plane) -> f32 {
     n as f32 / ((w - 2) * (h - 2)) as f32
 }
 
+/// Frames at the flow's working size (`fw × fh`), checked to share frame
+/// 0's size.
+fn load_frames(src: &dyn FrameSource, first: &Rgb, (fw, fh): (usize, usize)) -> Result<Vec<Rgb>> {
+    (0..src.len())
+        .into_par_iter()
+        .map(|i| -> Result<Rgb> {
+            let f = src.frame(i)?;
+            if f.w() != first.w() || f.h() != first.h() {
+                return Err(RomoError::Input(format!(
+                    "frame {i} is {}x{}, frame 0 is {}x{}: all frames must have one size",
+                    f.w(),
+                    f.h(),
+                    first.w(),
+                    first.h()
+                )));
+            }
+            Ok(f.resize(fw, fh))
+        })
+        .collect()
+}
+
+/// Forward and backward flow of every pair, resampled to the grid `gw × gh`.
+/// A model with its own input size (ONNX) gets frames at that size, loaded
+/// again from the source rather than upsampled from `small`.
+fn pair_flows(
+    src: &dyn FrameSource,
+    small: &[Rgb],
+    flow: &dyn FlowEstimator,
+    full: (usize, usize),
+    (gw, gh): (usize, usize),
+) -> Result<(Vec<Flow>, Vec<Flow>)> {
+    let fsize = small.first().map_or((0, 0), |f| (f.w(), f.h()));
+    let (sw, sh) = flow.frame_size(full, fsize);
+    let flow_frame = |i: usize| -> Result<std::borrow::Cow<'_, Rgb>> {
+        if (sw, sh) == fsize {
+            return Ok(std::borrow::Cow::Borrowed(&small[i]));
+        }
+        let f = src.frame(i)?;
+        Ok(std::borrow::Cow::Owned(if (f.w(), f.h()) == (sw, sh) {
+            f
+        } else {
+            f.resize(sw, sh)
+        }))
+    };
+    let flows = (0..small.len().saturating_sub(1))
+        .into_par_iter()
+        .map(|p| -> Result<(Flow, Flow)> {
+            let (f, b) = flow.flow_pair(&*flow_frame(p)?, &*flow_frame(p + 1)?)?;
+            Ok((f.resize(gw, gh), b.resize(gw, gh)))
+        })
+        .collect::<Result<Vec<_>>>()?;
+    Ok(flows.into_iter().unzip())
+}
+
+/// Per pair: why it cannot be used (a frame without texture, or too few
+/// cycle- and photo-consistent correspondences), None when usable.
+/// `texture[i]` is frame i's [`texture_fraction`].
+fn unusable_pairs(
+    texture: &[f32],
+    fwd: &[Flow],
+    bwd: &[Flow],
+    (valid_f, valid_b): (&[Vec<bool>], &[Vec<bool>]),
+    grid_grays: &[Plane],
+    o: &LabelOptions,
+) -> Vec<Option<String>> {
+    (0..fwd.len())
+        .into_par_iter()
+        .map(|p| {
+            let flat: Vec<usize> = [p, p + 1]
+                .into_iter()
+                .filter(|&i| texture[i] < o.min_texture_fraction)
+                .collect();
+            if !flat.is_empty() {
+                let list: Vec<String> = flat.iter().map(|i| format!("frame {i}")).collect();
+                return Some(format!(
+                    "no texture in {} (< {:.1}% of pixels with a gradient)",
+                    list.join(" and "),
+                    100.0 * o.min_texture_fraction
+                ));
+            }
+            // Cycle-consistent and photo-consistent: two unrelated frames
+            // (noise, a cut) can give a smooth near-zero flow that passes
+            // the cycle check everywhere but matches nothing.
+            let (a, b) = (&grid_grays[p], &grid_grays[p + 1]);
+            let vf = photo_consistent_fraction(&fwd[p], &valid_f[p], a, b)
+                .min(photo_consistent_fraction(&bwd[p], &valid_b[p], b, a));
+            (vf < o.min_valid_fraction).then(|| {
+                format!(
+                    "{:.1}% of pixels have a cycle- and photo-consistent flow (< {:.1}%)",
+                    100.0 * vf,
+                    100.0 * o.min_valid_fraction
+                )
+            })
+        })
+        .collect()
+}
+
+/// Fraction of the pixels of `a` that are valid in `v` and whose grey level
+/// matches `b` at the end of their flow within [`PHOTO_TOLERANCE`].
+fn photo_consistent_fraction(fl: &Flow, v: &[bool], a: &Plane, b: &Plane) -> f32 {
+    let w = fl.w();
+    let k = (0..v.len())
+        .filter(|&i| {
+            v[i] && {
+                let (x, y) = ((i % w) as f32, (i / w) as f32);
+                let q = b.bilinear(x + fl.u.data[i], y + fl.v.data[i]);
+                (a.data[i] - q).abs() < PHOTO_TOLERANCE
+            }
+        })
+        .count();
+    k as f32 / v.len().max(1) as f32
+}
+
+/// Everything computed once per video: frames at the flow's size, flows,
+/// cycle checks, usable pairs, features on the grid.
 fn prepare(
     src: &dyn FrameSource,
     o: &RomoOptions,
@@ -394,52 +525,14 @@ fn prepare(
     let grid_focal = ratio * gw as f64;
     let (fw, fh) = (gw * o.flow_scale, gh * o.flow_scale);
     progress("load", 0, n);
-    let small: Vec<Rgb> = t.time("load", || {
-        (0..n)
-            .into_par_iter()
-            .map(|i| -> Result<Rgb> {
-                let f = src.frame(i)?;
-                if f.w() != first.w() || f.h() != first.h() {
-                    return Err(RomoError::Input(format!(
-                        "frame {i} is {}x{}, frame 0 is {}x{}: all frames must have one size",
-                        f.w(),
-                        f.h(),
-                        first.w(),
-                        first.h()
-                    )));
-                }
-                Ok(f.resize(fw, fh))
-            })
-            .collect::<Result<Vec<_>>>()
-    })?;
+    let small = t.time("load", || load_frames(src, &first, (fw, fh)))?;
     progress("flow", 0, n - 1);
     let grays: Vec<Plane> = small.iter().map(|f| f.gray()).collect();
-    // A model with its own input size (ONNX) gets frames at that size,
-    // loaded again from the source rather than upsampled from `small`.
-    let (sw, sh) = flow.frame_size((first.w(), first.h()), (fw, fh));
-    let flow_frame = |i: usize| -> Result<std::borrow::Cow<'_, Rgb>> {
-        if (sw, sh) == (fw, fh) {
-            return Ok(std::borrow::Cow::Borrowed(&small[i]));
-        }
-        let f = src.frame(i)?;
-        Ok(std::borrow::Cow::Owned(if (f.w(), f.h()) == (sw, sh) {
-            f
-        } else {
-            f.resize(sw, sh)
-        }))
-    };
-    let flows: Vec<(Flow, Flow)> = t.time("flow", || {
-        (0..n - 1)
-            .into_par_iter()
-            .map(|p| -> Result<(Flow, Flow)> {
-                let (f, b) = flow.flow_pair(&*flow_frame(p)?, &*flow_frame(p + 1)?)?;
-                Ok((f.resize(gw, gh), b.resize(gw, gh)))
-            })
-            .collect::<Result<Vec<_>>>()
+    let (fwd, bwd) = t.time("flow", || {
+        pair_flows(src, &small, flow, (first.w(), first.h()), (gw, gh))
     })?;
     progress("flow", n - 1, n - 1);
-    let textured: Vec<f32> = grays.par_iter().map(texture_fraction).collect();
-    let (fwd, bwd): (Vec<Flow>, Vec<Flow>) = flows.into_iter().unzip();
+    let texture: Vec<f32> = grays.par_iter().map(texture_fraction).collect();
     let (mut valid_f, mut valid_b): (Vec<Vec<bool>>, Vec<Vec<bool>>) = t.time("cycle", || {
         (0..n - 1)
             .into_par_iter()
@@ -452,53 +545,18 @@ fn prepare(
             .unzip()
     });
     let grid_grays: Vec<Plane> = grays.par_iter().map(|g| g.resize(gw, gh)).collect();
-    let textured_px: Vec<Vec<bool>> = grid_grays
+    let textured: Vec<Vec<bool>> = grid_grays
         .par_iter()
         .map(|g| gradient_mask(g, o.labels.u_min_gradient))
         .collect();
-    let unusable: Vec<Option<String>> = (0..n - 1)
-        .into_par_iter()
-        .map(|p| {
-            let flat: Vec<usize> = [p, p + 1]
-                .into_iter()
-                .filter(|&i| textured[i] < o.labels.min_texture_fraction)
-                .collect();
-            if !flat.is_empty() {
-                let list: Vec<String> = flat.iter().map(|i| format!("frame {i}")).collect();
-                return Some(format!(
-                    "no texture in {} (< {:.1}% of pixels with a gradient)",
-                    list.join(" and "),
-                    100.0 * o.labels.min_texture_fraction
-                ));
-            }
-            // Cycle-consistent and photo-consistent: two unrelated frames
-            // (noise, a cut) can give a smooth near-zero flow that passes
-            // the cycle check everywhere but matches nothing.
-            let consistent = |fl: &Flow, v: &[bool], a: &Plane, b: &Plane| {
-                let w = fl.w();
-                let k = (0..v.len())
-                    .filter(|&i| {
-                        v[i] && {
-                            let (x, y) = ((i % w) as f32, (i / w) as f32);
-                            let q = b.bilinear(x + fl.u.data[i], y + fl.v.data[i]);
-                            (a.data[i] - q).abs() < PHOTO_TOLERANCE
-                        }
-                    })
-                    .count();
-                k as f32 / v.len().max(1) as f32
-            };
-            let (a, b) = (&grid_grays[p], &grid_grays[p + 1]);
-            let vf =
-                consistent(&fwd[p], &valid_f[p], a, b).min(consistent(&bwd[p], &valid_b[p], b, a));
-            (vf < o.labels.min_valid_fraction).then(|| {
-                format!(
-                    "{:.1}% of pixels have a cycle- and photo-consistent flow (< {:.1}%)",
-                    100.0 * vf,
-                    100.0 * o.labels.min_valid_fraction
-                )
-            })
-        })
-        .collect();
+    let unusable = unusable_pairs(
+        &texture,
+        &fwd,
+        &bwd,
+        (&valid_f, &valid_b),
+        &grid_grays,
+        &o.labels,
+    );
     // Unusable pairs carry no correspondences for anything downstream
     // (labels, temporal smoothing).
     for (p, u) in unusable.iter().enumerate() {
@@ -532,7 +590,7 @@ fn prepare(
         feats,
         c,
         grid_focal,
-        textured: textured_px,
+        textured,
         grid_rgb,
         evidence_textured,
         unusable,
@@ -717,25 +775,6 @@ pub fn segment_frames(
     fx: &dyn FeatureExtractor,
     progress: &dyn Fn(&str, usize, usize),
 ) -> Result<Segmentation> {
-    segment_frames_with_labels(src, o, flow, fx, progress, None)
-}
-
-/// Labels hook of [`segment_frames_with_labels`]: called with the frame
-/// index, the grid size and that frame's labels of the round, which it may
-/// change.
-pub type LabelHook<'a> = &'a (dyn Fn(usize, (usize, usize), &mut FrameLabels) + Sync);
-
-/// [`segment_frames`] with a hook that may replace each round's U/L labels
-/// before the MLP trains on them (for diagnosis: with the ground truth as
-/// labels it measures what the features and MLP can do on their own).
-pub fn segment_frames_with_labels(
-    src: &dyn FrameSource,
-    o: &RomoOptions,
-    flow: &dyn FlowEstimator,
-    fx: &dyn FeatureExtractor,
-    progress: &dyn Fn(&str, usize, usize),
-    label_hook: Option<LabelHook>,
-) -> Result<Segmentation> {
     o.validate()?;
     let n = src.len();
     if n < 2 {
@@ -748,6 +787,42 @@ pub fn segment_frames_with_labels(
     let pr = prepare(src, o, flow, fx, progress, &mut report)?;
     let mut timings = BTreeMap::new();
     let mut tm = Timer(&mut timings);
+    let (probs, (labels, fits)) = train_rounds(&pr, o, progress, &mut report, &mut tm)?;
+    let (gw, gh) = report.grid;
+    let planes: Vec<Plane> = probs
+        .into_iter()
+        .map(|d| Plane {
+            w: gw,
+            h: gh,
+            data: d,
+        })
+        .collect();
+    let mut planes = refine_grid(planes, &pr, &labels, o, &mut tm);
+    keep_frames_without_evidence(&mut planes, &fits, &mut report);
+    report_frames(&labels, &fits, &planes, o, &mut report);
+    for (k, v) in timings {
+        *report.timings_ms.entry(k).or_default() += v;
+    }
+    Ok(Segmentation {
+        probs: planes,
+        u: labels.iter().map(|l| l.u.clone()).collect(),
+        l: labels.iter().map(|l| l.l.clone()).collect(),
+        report,
+    })
+}
+
+/// The rounds of (fit → label → train): each round fits the pairs without
+/// the pixels the previous round called moving, labels the frames and
+/// trains the MLP on them. Returns the last round's probabilities per frame
+/// (grid, pixel-major) and its labels and fits.
+fn train_rounds(
+    pr: &Prepared,
+    o: &RomoOptions,
+    progress: &dyn Fn(&str, usize, usize),
+    report: &mut RomoReport,
+    tm: &mut Timer<'_>,
+) -> Result<(Vec<Vec<f32>>, RoundLabels)> {
+    let n = pr.feats.len();
     let mut mlp = Mlp::new(pr.c, o.seed ^ 0x11);
     let mut probs: Vec<Vec<f32>> = Vec::new();
     let mut last: Option<RoundLabels> = None;
@@ -761,13 +836,8 @@ pub fn segment_frames_with_labels(
         });
         let prev = last.as_ref().map(|l| l.1.as_slice());
         let (mut labels, fits) = tm.time("geometry", || {
-            label_round(&pr, moving.as_deref(), prev, o, round)
+            label_round(pr, moving.as_deref(), prev, o, round)
         });
-        if let Some(hook) = label_hook {
-            for (t, fl) in labels.iter_mut().enumerate() {
-                hook(t, report.grid, fl);
-            }
-        }
         if o.labels.u_propagation_frames > 0 {
             tm.time("geometry", || {
                 propagate_u(
@@ -792,7 +862,7 @@ pub fn segment_frames_with_labels(
         };
         progress("mlp", round, o.iterations);
         let rep = tm.time("mlp", || {
-            let (x, y) = samples(&pr, &labels, &keep, o, round);
+            let (x, y) = samples(pr, &labels, &keep, o, round);
             train(
                 &mut mlp,
                 &x,
@@ -807,15 +877,20 @@ pub fn segment_frames_with_labels(
         probs = tm.time("mlp", || pr.feats.iter().map(|f| mlp.predict(f)).collect());
         last = Some((labels, fits));
     }
-    let (gw, gh) = report.grid;
-    let planes: Vec<Plane> = probs
-        .into_iter()
-        .map(|d| Plane {
-            w: gw,
-            h: gh,
-            data: d,
-        })
-        .collect();
+    let last = last.ok_or_else(|| RomoError::Options("romo: iterations >= 1 required".into()))?;
+    Ok((probs, last))
+}
+
+/// Refinement on the grid, in order: temporal smoothing along the flow,
+/// region completion, the static veto, the object-level graph cut, and
+/// temporal smoothing in place when not along the flow.
+fn refine_grid(
+    planes: Vec<Plane>,
+    pr: &Prepared,
+    labels: &[FrameLabels],
+    o: &RomoOptions,
+    tm: &mut Timer<'_>,
+) -> Vec<Plane> {
     let mut planes = if o.refine.temporal_along_flow {
         tm.time("refine", || {
             temporal_smooth_flow(
@@ -840,14 +915,16 @@ pub fn segment_frames_with_labels(
                     &pr.bwd[t - 1]
                 };
                 let lab = flow_segments(f, f.mean_magnitude(), o.regions.k, o.regions.min_size);
-                let fixed = last.as_ref().map(|(labels, _)| labels[t].l.as_slice());
-                complete(&mut p.data, &lab, o.regions.threshold, fixed);
+                complete(
+                    &mut p.data,
+                    &lab,
+                    o.regions.threshold,
+                    Some(labels[t].l.as_slice()),
+                );
             })
         });
     }
-    if o.refine.static_veto_factor > 0.0
-        && let Some((labels, _)) = &last
-    {
+    if o.refine.static_veto_factor > 0.0 {
         for (p, l) in planes.iter_mut().zip(labels) {
             let thr = o.refine.static_veto_factor * l.v;
             for (v, s) in p.data.iter_mut().zip(&l.s) {
@@ -857,9 +934,7 @@ pub fn segment_frames_with_labels(
             }
         }
     }
-    if o.refine.objects.method == ObjectMethod::GraphCut
-        && let Some((labels, _)) = &last
-    {
+    if o.refine.objects.method == ObjectMethod::GraphCut {
         let ev = Evidence {
             probs: &planes,
             s: labels.iter().map(|l| l.s.as_slice()).collect(),
@@ -885,87 +960,93 @@ pub fn segment_frames_with_labels(
             planes = temporal_smooth(&planes, o.refine.temporal_weight);
         }
     }
-    // Frames without a usable pair on either side carry no evidence of
-    // motion: keep them whole rather than trust the MLP's guess on them.
-    if let Some((_, fits)) = &last {
-        let np = fits.len();
-        for (p, f) in fits.iter().enumerate() {
-            if let Err(reason) = f {
-                report.warnings.push(format!(
-                    "pair {p}–{} skipped: {reason}; its frames are labelled from their other neighbour",
-                    p + 1
-                ));
-                report.skipped_pairs.push(SkippedPair {
-                    pair: p,
-                    reason: reason.clone(),
-                });
-            }
-        }
-        for (t, plane) in planes.iter_mut().enumerate() {
-            let fwd_ok = t < np && fits[t].is_ok();
-            let bwd_ok = t > 0 && fits[t - 1].is_ok();
-            if !fwd_ok && !bwd_ok {
-                plane.data.fill(0.0);
-                report.no_evidence_frames.push(t);
-            }
-        }
-        if !report.no_evidence_frames.is_empty() {
-            let list: Vec<String> = report
-                .no_evidence_frames
-                .iter()
-                .map(|t| t.to_string())
-                .collect();
+    planes
+}
+
+/// Report the skipped pairs, and keep whole (probability 0) the frames
+/// without a usable pair on either side: they carry no evidence of motion,
+/// so the MLP's guess on them is not trusted.
+fn keep_frames_without_evidence(
+    planes: &mut [Plane],
+    fits: &[std::result::Result<PairFit, String>],
+    report: &mut RomoReport,
+) {
+    let np = fits.len();
+    for (p, f) in fits.iter().enumerate() {
+        if let Err(reason) = f {
             report.warnings.push(format!(
-                "no evidence of motion in frame(s) {} (no usable pair on either side): kept whole",
-                list.join(", ")
+                "pair {p}–{} skipped: {reason}; its frames are labelled from their other neighbour",
+                p + 1
             ));
-        }
-    }
-    let mut u_all = Vec::new();
-    let mut l_all = Vec::new();
-    if let Some((labels, fits)) = last {
-        u_all = labels.iter().map(|l| l.u.clone()).collect();
-        l_all = labels.iter().map(|l| l.l.clone()).collect();
-        for (t, l) in labels.iter().enumerate() {
-            let dropped = l.inlier_ratio < o.labels.min_inlier_ratio;
-            if dropped {
-                report.dropped_frames.push(t);
-            }
-            report.frames.push(FrameReport {
-                index: t,
-                name: String::new(),
-                model_fwd: match fits.get(t) {
-                    Some(Ok(f)) => f.report.model.clone(),
-                    _ => String::new(),
-                },
-                inlier_ratio: l.inlier_ratio,
-                u_coverage: l.u_coverage,
-                l_coverage: l.l_coverage,
-                valid_ratio: l.valid_ratio,
-                v_px: l.v,
-                dropped,
-                moving_fraction: planes[t]
-                    .data
-                    .iter()
-                    .filter(|h| **h > o.refine.threshold)
-                    .count() as f32
-                    / (gw * gh) as f32,
+            report.skipped_pairs.push(SkippedPair {
+                pair: p,
+                reason: reason.clone(),
             });
         }
-        report.pairs = fits
-            .into_iter()
-            .map(|f| f.map(|f| f.report).unwrap_or_else(|_| FitReport::skipped()))
+    }
+    for (t, plane) in planes.iter_mut().enumerate() {
+        let fwd_ok = t < np && fits[t].is_ok();
+        let bwd_ok = t > 0 && fits[t - 1].is_ok();
+        if !fwd_ok && !bwd_ok {
+            plane.data.fill(0.0);
+            report.no_evidence_frames.push(t);
+        }
+    }
+    if !report.no_evidence_frames.is_empty() {
+        let list: Vec<String> = report
+            .no_evidence_frames
+            .iter()
+            .map(|t| t.to_string())
             .collect();
+        report.warnings.push(format!(
+            "no evidence of motion in frame(s) {} (no usable pair on either side): kept whole",
+            list.join(", ")
+        ));
     }
-    for (k, v) in timings {
-        *report.timings_ms.entry(k).or_default() += v;
+}
+
+/// Per-frame and per-pair diagnostics of the last round.
+fn report_frames(
+    labels: &[FrameLabels],
+    fits: &[std::result::Result<PairFit, String>],
+    planes: &[Plane],
+    o: &RomoOptions,
+    report: &mut RomoReport,
+) {
+    for (t, l) in labels.iter().enumerate() {
+        let dropped = l.inlier_ratio < o.labels.min_inlier_ratio;
+        if dropped {
+            report.dropped_frames.push(t);
+        }
+        let grid = planes[t].data.len().max(1);
+        report.frames.push(FrameReport {
+            index: t,
+            name: String::new(),
+            model_fwd: match fits.get(t) {
+                Some(Ok(f)) => f.report.model.clone(),
+                _ => String::new(),
+            },
+            inlier_ratio: l.inlier_ratio,
+            u_coverage: l.u_coverage,
+            l_coverage: l.l_coverage,
+            valid_ratio: l.valid_ratio,
+            v_px: l.v,
+            dropped,
+            moving_fraction: planes[t]
+                .data
+                .iter()
+                .filter(|h| **h > o.refine.threshold)
+                .count() as f32
+                / grid as f32,
+        });
     }
-    Ok(Segmentation {
-        probs: planes,
-        u: u_all,
-        l: l_all,
-        report,
-    })
+    report.pairs = fits
+        .iter()
+        .map(|f| match f {
+            Ok(f) => f.report.clone(),
+            Err(_) => FitReport::skipped(),
+        })
+        .collect();
 }
 
 #[cfg(test)]
@@ -974,11 +1055,14 @@ mod tests {
     use super::*;
 
     /// A partial `flow` object changes only the fields it names: the rest
-    /// stay at the mask stage's preset, not at `DisOptions::default()`.
+    /// stay at the mask stage's preset, not at OpenCV's MEDIUM.
     #[test]
     fn partial_flow_options_override_the_mask_preset() {
         let preset = DisOptions::masks();
-        assert_ne!(preset.finest_scale, DisOptions::default().finest_scale);
+        assert_ne!(
+            preset.finest_scale,
+            DisOptions::opencv_medium().finest_scale
+        );
         let o: RomoOptions = serde_json::from_str("{}").unwrap();
         assert_eq!(o.flow.finest_scale, preset.finest_scale);
         assert_eq!(o.flow.patch_stride, preset.patch_stride);

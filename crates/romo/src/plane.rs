@@ -214,14 +214,20 @@ impl Plane {
 
     /// Element-wise combination of two planes of the same size.
     pub fn zip(&self, o: &Plane, f: impl Fn(f32, f32) -> f32 + Sync) -> Plane {
+        self.zip3(o, o, |a, b, _| f(a, b))
+    }
+
+    /// Element-wise combination of three planes of the same size.
+    pub fn zip3(&self, b: &Plane, c: &Plane, f: impl Fn(f32, f32, f32) -> f32 + Sync) -> Plane {
         Plane {
             w: self.w,
             h: self.h,
             data: self
                 .data
                 .par_iter()
-                .zip(o.data.par_iter())
-                .map(|(a, b)| f(*a, *b))
+                .zip(b.data.par_iter())
+                .zip(c.data.par_iter())
+                .map(|((a, b), c)| f(*a, *b, *c))
                 .collect(),
         }
     }

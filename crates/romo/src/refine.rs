@@ -12,16 +12,20 @@ use serde::{Deserialize, Serialize};
 
 /// Refinement options.
 #[derive(Debug, Clone, Serialize, Deserialize)]
+#[cfg_attr(feature = "cli", derive(clap::Args))]
 #[serde(default)]
 pub struct RefineOptions {
     /// Guided-filter window radius in full-resolution px (default 8).
+    #[cfg_attr(feature = "cli", arg(skip))]
     pub radius: usize,
     /// Guided-filter regulariser ε (guide in [0, 1]; default 1e-3).
+    #[cfg_attr(feature = "cli", arg(skip))]
     pub eps: f32,
     /// Fast guided filter (He & Sun 2015, arXiv:1505.00996): the filter's
     /// linear coefficients are computed on the guide subsampled by this
     /// factor and upsampled bilinearly, then applied at full resolution
     /// (default 4, as in that paper; 1 = the exact filter).
+    #[cfg_attr(feature = "cli", arg(skip))]
     pub subsample: usize,
     /// Guide the filter with the frame's colour (He et al.'s colour guided
     /// filter: per window a 3 × 3 covariance, so an edge between two
@@ -29,31 +33,37 @@ pub struct RefineOptions {
     /// true: demo scene J, seeds 0 / 1 / 2, luma 0.838 / 0.813 / 0.820,
     /// colour 0.858 / 0.834 / 0.841; DAVIS luma 0.648 / 0.653 / 0.673,
     /// colour 0.650 / 0.657 / 0.676).
+    #[cfg_attr(feature = "cli", arg(skip))]
     pub colour_guide: bool,
     /// Probability above which a pixel is moving (paper: 0.5).
+    #[cfg_attr(feature = "cli", arg(skip))]
     pub threshold: f32,
     /// Static veto (ours): grid pixels whose last-round residual is below
     /// `static_veto_factor`·v (geometrically static with high confidence,
     /// like L with its own factor) get moving probability 0 before
     /// upsampling; 0 disables (the paper thresholds H alone). The MLP, with
     /// 8 units on hand-made features, paints whole regions that are
-    /// geometrically static (sky, crowd) as moving. Default: see README.
+    /// geometrically static (sky, crowd) as moving. Default 0.02.
+    #[cfg_attr(feature = "cli", arg(skip))]
     pub static_veto_factor: f32,
     /// Weight of each neighbouring frame's probability in the temporal
     /// smoothing `(1 − 2w)·H_t + w·(H_{t−1} + H_{t+1})` (ours; default 0.25,
-    /// 0 = off; DAVIS mean J +0.002 along the flow, see README).
+    /// 0 = off; DAVIS mean J +0.002 along the flow).
+    #[cfg_attr(feature = "cli", arg(long, required = false))]
     pub temporal_weight: f32,
-    /// Temporal smoothing follows the optical flow (ours; the issue's
-    /// optional item): the neighbours' probabilities are sampled where each
+    /// Temporal smoothing follows the optical flow (ours): the neighbours' probabilities are sampled where each
     /// pixel's forward / backward flow lands, only where that flow passed
     /// the cycle check (elsewhere the frame's own value stands in). False =
     /// the same pixel in the neighbouring frames (default true).
+    #[cfg_attr(feature = "cli", arg(skip))]
     pub temporal_along_flow: bool,
     /// Passes of the temporal smoothing (each widens its support by one
     /// frame per side; default 1).
+    #[cfg_attr(feature = "cli", arg(long, required = false))]
     pub temporal_passes: usize,
     /// Object-level refinement on the grid after the per-pixel steps
     /// (ours; [`crate::objects`]).
+    #[cfg_attr(feature = "cli", command(flatten))]
     pub objects: crate::objects::ObjectOptions,
 }
 
@@ -101,17 +111,7 @@ pub fn guided_filter(i: &Plane, p: &Plane, r: usize, eps: f32) -> Plane {
 /// `q = a·I + b` with window-averaged coefficients `a`, `b` (same size as
 /// the guide `i`).
 fn apply_coefficients(ma: &Plane, mb: &Plane, i: &Plane) -> Plane {
-    Plane {
-        w: i.w,
-        h: i.h,
-        data: ma
-            .data
-            .iter()
-            .zip(&mb.data)
-            .zip(&i.data)
-            .map(|((a, b), g)| a * g + b)
-            .collect(),
-    }
+    ma.zip3(mb, i, |a, b, g| a * g + b)
 }
 
 /// Window means of the guided filter's linear coefficients (ā, b̄).
@@ -121,29 +121,9 @@ fn guided_coefficients(i: &Plane, p: &Plane, r: usize, eps: f32) -> (Plane, Plan
     let cip = i.zip(p, |a, b| a * b).box_mean(r);
     let ii = i.map(|a| a * a).box_mean(r);
     let var = ii.zip(&mi, |s, m| s - m * m);
-    let cov = Plane {
-        w: i.w,
-        h: i.h,
-        data: cip
-            .data
-            .iter()
-            .zip(&mi.data)
-            .zip(&mp.data)
-            .map(|((c, a), b)| c - a * b)
-            .collect(),
-    };
+    let cov = cip.zip3(&mi, &mp, |c, a, b| c - a * b);
     let a = cov.zip(&var, |c, v| c / (v + eps));
-    let b = Plane {
-        w: i.w,
-        h: i.h,
-        data: mp
-            .data
-            .iter()
-            .zip(&a.data)
-            .zip(&mi.data)
-            .map(|((p, a), m)| p - a * m)
-            .collect(),
-    };
+    let b = mp.zip3(&a, &mi, |p, a, m| p - a * m);
     (a.box_mean(r), b.box_mean(r))
 }
 

@@ -20,19 +20,24 @@ use serde::{Deserialize, Serialize};
 
 /// Region-completion options.
 #[derive(Debug, Clone, Serialize, Deserialize)]
+#[cfg_attr(feature = "cli", derive(clap::Args))]
 #[serde(default)]
 pub struct RegionOptions {
     /// Complete the probability over flow segments (default true; see the
     /// README for what it gains and costs).
+    #[cfg_attr(feature = "cli", arg(long = "no-region-completion", action = clap::ArgAction::SetFalse, help = "Turn off region completion (a segment of the flow field mostly called moving becomes moving as a whole, except its confidently static pixels)"))]
     pub enabled: bool,
     /// Felzenszwalb–Huttenlocher scale `k` (in units of the normalised flow
     /// difference × pixels; larger merges more; default 4).
+    #[cfg_attr(feature = "cli", arg(long = "region-k", required = false))]
     pub k: f32,
     /// Regions smaller than this many grid pixels are merged into their
     /// most similar neighbour (default 20).
+    #[cfg_attr(feature = "cli", arg(skip))]
     pub min_size: usize,
     /// A region is completed when its mean probability is above this
     /// (default 0.5, the mask threshold).
+    #[cfg_attr(feature = "cli", arg(skip))]
     pub threshold: f32,
 }
 

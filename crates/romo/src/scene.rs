@@ -77,9 +77,10 @@ pub fn make_flow(o: &RomoOptions) -> Result<Box<dyn FlowEstimator>> {
     match &o.flow_backend {
         FlowBackend::Dis => Ok(Box::new(Dis::new(o.flow.clone()))),
         #[cfg(feature = "onnx")]
-        FlowBackend::Onnx { model, input_scale } => {
-            Ok(Box::new(crate::onnx::OnnxFlow::load(model, *input_scale)?))
-        }
+        FlowBackend::Onnx { model } => Ok(Box::new(crate::onnx::OnnxFlow::load(
+            model,
+            o.onnx_flow_scale,
+        )?)),
         #[cfg(not(feature = "onnx"))]
         FlowBackend::Onnx { model, .. } => Err(RomoError::Onnx(format!(
             "{}: this build has no ONNX support (rebuild with `--features romo/onnx`)",

@@ -137,7 +137,6 @@ fn onnx_flow_recovers_a_known_translation() {
     let opts = romo::RomoOptions {
         flow_backend: romo::FlowBackend::Onnx {
             model: model.clone(),
-            input_scale: 1.0,
         },
         ..Default::default()
     };

@@ -11,98 +11,17 @@ pub struct Args {
     /// Scene folder (with `images/`).
     #[arg(long)]
     pub scene: PathBuf,
-    /// Output folder for `masks/` (default: the scene folder).
-    #[arg(long)]
-    pub out: Option<PathBuf>,
-    /// Rounds of fit → label → train (paper: 2).
-    #[arg(long, default_value_t = 2)]
-    pub iterations: usize,
-    /// Also write `probabilities/<stem>.exr` (moving probability).
-    #[arg(long)]
-    pub save_probabilities: bool,
-    /// Also write `motion/<name>.png` overlays.
-    #[arg(long)]
-    pub overlays: bool,
-    /// ONNX feature encoder (XFeat layout), concatenated with the built-in
-    /// features; needs a build with `--features romo/onnx` and ORT_DYLIB_PATH.
-    #[arg(long)]
-    pub onnx_features: Option<PathBuf>,
-    /// ONNX optical-flow model instead of the built-in DIS: two [1, 3, H, W]
-    /// RGB images in, a [1, 2, h, w] flow (or [1, 4, h, w]: forward, then
-    /// backward) out, e.g. GMFlow from `scripts/export_gmflow_onnx.py`;
-    /// frames are padded (or shrunk) to a fixed input size. Needs a build
-    /// with `--features onnx` and ORT_DYLIB_PATH.
-    #[arg(long)]
-    pub onnx_flow: Option<PathBuf>,
-    /// Pixel values in [0, 1] are multiplied by this for the flow model
-    /// (255 for RAFT exports that take 0–255).
-    #[arg(long, default_value_t = 1.0)]
-    pub onnx_flow_scale: f32,
-    /// Full options as JSON (a partial `RomoOptions`; flags above override).
+    /// Full options as JSON (a partial `RomoOptions`; the flags override it).
     #[arg(long)]
     pub options: Option<PathBuf>,
     /// Integer downscale of the frames on load (masks are still written at
     /// the images' own size).
     #[arg(long, default_value_t = 1)]
     pub downscale: u32,
-    /// Random seed.
-    #[arg(long, default_value_t = 0)]
-    pub seed: u64,
-    /// How each pair chooses between the fundamental matrix and a
-    /// homography (the low-parallax case): inlier-ratio (default; H when it
-    /// explains ≥ --h-inlier-ratio × F's inliers), gric (Torr 1998),
-    /// fundamental (always F, the paper) or homography (always H).
-    #[arg(long, value_enum)]
-    pub model_selection: Option<romo::geometry::robust::ModelSelection>,
-    /// For --model-selection inlier-ratio: H is chosen when its inliers reach
-    /// this fraction of F's (default 0.9).
-    #[arg(long)]
-    pub h_inlier_ratio: Option<f64>,
-    /// Use F instead of the homography choice when F still labels at least
-    /// this fraction of a pair's points moving (default 0.005; 0 = off).
-    #[arg(long)]
-    pub f_informative_fraction: Option<f32>,
-    /// Spread moving (U) labels along the flow to this many neighbouring
-    /// frames (default 0 = off).
-    #[arg(long)]
-    pub u_propagation_frames: Option<usize>,
-    /// Weight w of each neighbouring frame in the temporal smoothing of the
-    /// probabilities, (1 − 2w)·H_t + w·(H_{t−1} + H_{t+1}) (default 0.25; 0 = off).
-    #[arg(long)]
-    pub temporal_weight: Option<f32>,
-    /// Passes of the temporal smoothing (default 1).
-    #[arg(long)]
-    pub temporal_passes: Option<usize>,
-    /// Leave the two chromaticity channels out of the built-in features.
-    #[arg(long)]
-    pub no_chromaticity: bool,
-    /// Turn off the cheirality test (flow along the epipolar line that only
-    /// a point behind the cameras could make counts as motion; on by default).
-    #[arg(long)]
-    pub no_cheirality: bool,
-    /// Focal length ÷ image width for the cheirality test (default: the
-    /// scene's intrinsics, else 1.2 × long side ÷ width, COLMAP's prior).
-    #[arg(long)]
-    pub focal_ratio: Option<f64>,
-    /// Turn off the three-view depth-consistency test (a pixel whose depths
-    /// from its forward and backward pairs disagree is moving; on by
-    /// default).
-    #[arg(long)]
-    pub no_three_view: bool,
-    /// Turn off region completion (a segment of the flow field mostly
-    /// called moving becomes moving as a whole, except its confidently
-    /// static pixels; on by default).
-    #[arg(long)]
-    pub no_region_completion: bool,
-    /// Felzenszwalb–Huttenlocher scale k of those segments (default 4;
-    /// larger merges more).
-    #[arg(long)]
-    pub region_k: Option<f32>,
-    /// Object-level refinement: graph-cut (one minimum cut over all frames
-    /// from the geometric evidence, the MLP, a colour model, image contrast
-    /// and the flow; default) or off.
-    #[arg(long, value_enum)]
-    pub objects: Option<romo::objects::ObjectMethod>,
+    /// RoMo's options (`romo::RomoOptions`; each flag's default is its
+    /// field's).
+    #[command(flatten)]
+    pub romo: romo::cli::Flags<romo::RomoOptions>,
 }
 
 /// Run `romosplat mask`.
@@ -128,58 +47,11 @@ pub fn read_options(path: &Path) -> anyhow::Result<romo::RomoOptions> {
 
 /// The RoMo options these flags select (`--options` file, then the flags).
 pub fn options(args: &Args) -> anyhow::Result<romo::RomoOptions> {
-    let mut opts: romo::RomoOptions = match &args.options {
+    let base = match &args.options {
         Some(p) => read_options(p)?,
         None => romo::RomoOptions::default(),
     };
-    opts.iterations = args.iterations;
-    opts.save_probabilities |= args.save_probabilities;
-    opts.overlays |= args.overlays;
-    opts.seed = args.seed;
-    if let Some(m) = args.model_selection {
-        opts.labels.robust.selection = m;
-    }
-    if let Some(r) = args.h_inlier_ratio {
-        opts.labels.robust.h_inlier_ratio = r;
-    }
-    if let Some(f) = args.f_informative_fraction {
-        opts.labels.f_informative_fraction = f;
-    }
-    if let Some(n) = args.u_propagation_frames {
-        opts.labels.u_propagation_frames = n;
-    }
-    if let Some(w) = args.temporal_weight {
-        opts.refine.temporal_weight = w;
-    }
-    if let Some(n) = args.temporal_passes {
-        opts.refine.temporal_passes = n;
-    }
-    opts.chromaticity_features &= !args.no_chromaticity;
-    opts.labels.cheirality &= !args.no_cheirality;
-    if args.focal_ratio.is_some() {
-        opts.focal_ratio = args.focal_ratio;
-    }
-    opts.regions.enabled &= !args.no_region_completion;
-    opts.labels.three_view &= !args.no_three_view;
-    if let Some(k) = args.region_k {
-        opts.regions.k = k;
-    }
-    if let Some(m) = args.objects {
-        opts.refine.objects.method = m;
-    }
-    if let Some(m) = &args.onnx_flow {
-        opts.flow_backend = romo::FlowBackend::Onnx {
-            model: m.clone(),
-            input_scale: args.onnx_flow_scale,
-        };
-    }
-    if let Some(m) = &args.onnx_features {
-        opts.features = romo::FeatureBackend::Onnx { model: m.clone() };
-    }
-    if args.out.is_some() {
-        opts.out = args.out.clone();
-    }
-    Ok(opts)
+    Ok(args.romo.over(base)?)
 }
 
 /// RoMo masks for the scene folder `scene_dir` (frames downscaled by

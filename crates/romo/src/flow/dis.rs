@@ -39,9 +39,11 @@ use std::time::Instant;
 /// Patch sizes with a compiled kernel.
 pub const PATCH_SIZES: [usize; 6] = [4, 6, 8, 10, 12, 16];
 
-/// DIS parameters. Defaults follow OpenCV's MEDIUM preset (finest scale 1,
-/// 8-px patches every 3 px, 25 descent iterations split over two passes,
-/// spatial propagation, mean normalisation, 5 variational iterations).
+/// DIS parameters. `Default` is the mask stage's preset
+/// ([`DisOptions::masks`]); [`DisOptions::opencv_medium`] is OpenCV's MEDIUM
+/// (finest scale 1, 8-px patches every 3 px, 25 descent iterations split
+/// over two passes, spatial propagation, mean normalisation, 5 variational
+/// iterations), which the field defaults below describe.
 #[derive(Debug, Clone, Serialize, Deserialize)]
 #[serde(default)]
 pub struct DisOptions {
@@ -88,7 +90,16 @@ pub struct DisOptions {
 }
 
 impl Default for DisOptions {
+    /// [`DisOptions::masks`], so that a partial `flow` object in a
+    /// `RomoOptions` JSON overrides fields of the mask stage's preset.
     fn default() -> Self {
+        Self::masks()
+    }
+}
+
+impl DisOptions {
+    /// OpenCV's MEDIUM preset (the field defaults documented above).
+    pub fn opencv_medium() -> Self {
         Self {
             finest_scale: 1,
             patch_size: 8,
@@ -102,18 +113,15 @@ impl Default for DisOptions {
             variational: VariationalOptions::default(),
         }
     }
-}
 
-impl DisOptions {
-    /// The mask stage's preset (`RomoOptions::default().flow`): the
-    /// defaults with the finest level computed at full resolution
-    /// (`finest_scale` 0) and patches every 2 px (`patch_stride` 2). The
+    /// The mask stage's preset (`DisOptions::default()`): MEDIUM with the
+    /// finest level computed at full resolution (`finest_scale` 0) and patches every 2 px (`patch_stride` 2). The
     /// pipeline runs DIS on frames of twice its working grid, so MEDIUM's
     /// half-resolution finest level only resolves the grid itself; thin and
     /// repetitively textured movers (the demo's striped and checked
     /// pedestrians) then get flow smoothed into the background, and
     /// labels and region completion lose them. Measured: demo scene J,
-    /// seeds 0 / 1 / 2, with the defaults 0.759 / 0.770 / 0.764, with this
+    /// seeds 0 / 1 / 2, with MEDIUM 0.759 / 0.770 / 0.764, with this
     /// preset 0.820 / 0.797 / 0.804 (finest level alone: 0.793 for seed 0; stride 1 0.802, patch 6
     /// 0.812, patch 12 0.798, frames at 3× the grid 0.810); DAVIS mean J
     /// 0.639 → 0.652 for seed 0 (camel 0.72 → 0.80, car-roundabout 0.74 →
@@ -123,28 +131,28 @@ impl DisOptions {
         Self {
             finest_scale: 0,
             patch_stride: 2,
-            ..Self::default()
+            ..Self::opencv_medium()
         }
     }
 
-    /// Preset for large motion (Sintel ambush/market, 30–70 px): the
-    /// defaults with damped descent steps (`descent_step` 0.125, which need
+    /// Preset for large motion (Sintel ambush/market, 30–70 px): MEDIUM
+    /// with damped descent steps (`descent_step` 0.125, which need
     /// the full 25 Gauss–Newton iterations at every level) and the
     /// coarsest level kept at ≥ 64 px wide (`coarsest_width` 64; on Sintel
     /// 64×28 instead of 32×14, where 8-px patches cover a quarter of the
     /// image height). Measured mean EPE on the five large-motion pairs
-    /// 39.3 px vs 46–47 px for the default (OpenCV MEDIUM: 39.7). Fragile:
+    /// 39.3 px vs 46–47 px for MEDIUM (OpenCV's own MEDIUM: 39.7). Fragile:
     /// step 0.1 or 0.15 gives 40.2 / 40.1, coarsest width 32 gives 41.1,
     /// 128 gives 44.1. It is conservative, not general: the damped coarse
     /// levels cannot travel far, so a clean 40 px translation of a
-    /// synthetic texture is missed (where the default gets 0.12 px). Not
+    /// synthetic texture is missed (where MEDIUM gets 0.12 px). Not
     /// used by the mask stage.
     pub fn large_motion() -> Self {
         Self {
             descent_step: 0.125,
             coarsest_width: 64,
             finest_grad_descent_iters: 0,
-            ..Self::default()
+            ..Self::opencv_medium()
         }
     }
 
@@ -513,7 +521,7 @@ mod tests {
     }
 
     fn check(map: impl Fn(f32, f32) -> (f32, f32) + Sync, max_epe: f64) {
-        check_with(DisOptions::default(), map, max_epe)
+        check_with(DisOptions::opencv_medium(), map, max_epe)
     }
 
     fn check_with(opts: DisOptions, map: impl Fn(f32, f32) -> (f32, f32) + Sync, max_epe: f64) {
@@ -540,7 +548,7 @@ mod tests {
         assert!(e < max_epe, "EPE {e} >= {max_epe}");
     }
 
-    // Tolerances: measured 2026-11 on these textures (translation ~0.05 px,
+    // Tolerances: measured on these textures (translation ~0.05 px,
     // affine ~0.1 px); the bounds leave a margin of several times that.
     #[test]
     fn recovers_a_translation() {
@@ -552,7 +560,7 @@ mod tests {
     fn recovers_a_translation_at_full_resolution() {
         let opts = DisOptions {
             finest_scale: 0,
-            ..Default::default()
+            ..DisOptions::opencv_medium()
         };
         check_with(opts, |_, _| (3.4, -1.7), 0.25);
     }
@@ -620,9 +628,11 @@ mod tests {
                 x >= 10.0 && y >= 10.0 && x < (w - 10) as f32 && y < (h - 10) as f32
             })
             .collect();
-        // Only the default: the damped large_motion preset cannot travel
-        // this far at the coarsest level (EPE 49 px; see its doc).
-        let est = Dis::default().compute(&i0, &i1).unwrap();
+        // Only MEDIUM: the damped large_motion preset cannot travel this
+        // far at the coarsest level (EPE 49 px; see its doc).
+        let est = Dis::new(DisOptions::opencv_medium())
+            .compute(&i0, &i1)
+            .unwrap();
         let e = epe(&est, &gt, Some(&mask));
         assert!(e < 0.5, "EPE {e} >= 0.5");
     }
@@ -642,7 +652,7 @@ mod tests {
                 y as f32 + 2.1 + 0.01 * x as f32,
             )
         });
-        let dis = Dis::default();
+        let dis = Dis::new(DisOptions::opencv_medium());
         crate::flow::simd::force_baseline(true);
         let base = dis.compute(&i0, &i1);
         crate::flow::simd::force_baseline(false);

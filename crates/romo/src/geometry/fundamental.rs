@@ -72,19 +72,26 @@ fn unit(f: Matrix3<f64>) -> Matrix3<f64> {
     if n > 0.0 { f / n } else { f }
 }
 
+/// Hartley normalisations `ta`, `tb` of both point sets and the design
+/// rows of the normalised correspondences.
+fn normalised_design(a: &[Pt], b: &[Pt]) -> (Matrix3<f64>, Matrix3<f64>, Vec<SVector<f64, 9>>) {
+    let (ta, na) = normalise(a);
+    let (tb, nb) = normalise(b);
+    let rows = na
+        .iter()
+        .zip(&nb)
+        .map(|(p, q)| design_row(*p, *q))
+        .collect();
+    (ta, tb, rows)
+}
+
 /// Normalised 8-point algorithm on ≥ 8 correspondences; `None` when
 /// degenerate.
 pub fn eight_point(a: &[Pt], b: &[Pt]) -> Option<Matrix3<f64>> {
     if a.len() < 8 || a.len() != b.len() {
         return None;
     }
-    let (ta, na) = normalise(a);
-    let (tb, nb) = normalise(b);
-    let rows: Vec<SVector<f64, 9>> = na
-        .iter()
-        .zip(&nb)
-        .map(|(p, q)| design_row(*p, *q))
-        .collect();
+    let (ta, tb, rows) = normalised_design(a, b);
     let (v, _) = solve_nullspace(&rows)?;
     let f = rank2(to_matrix(&v));
     let f = tb.transpose() * f * ta;
@@ -139,13 +146,7 @@ pub fn seven_point(a: &[Pt], b: &[Pt]) -> Vec<Matrix3<f64>> {
     if a.len() != 7 || b.len() != 7 {
         return vec![];
     }
-    let (ta, na) = normalise(a);
-    let (tb, nb) = normalise(b);
-    let rows: Vec<SVector<f64, 9>> = na
-        .iter()
-        .zip(&nb)
-        .map(|(p, q)| design_row(*p, *q))
-        .collect();
+    let (ta, tb, rows) = normalised_design(a, b);
     let Some((v1, v2)) = solve_nullspace(&rows) else {
         return vec![];
     };

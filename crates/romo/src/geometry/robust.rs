@@ -40,22 +40,32 @@ pub enum ModelSelection {
 
 /// Options of the robust estimation.
 #[derive(Debug, Clone, Serialize, Deserialize)]
+#[cfg_attr(feature = "cli", derive(clap::Args))]
 #[serde(default)]
 pub struct RobustOptions {
     /// LMedS samples drawn per model (default 500: 99% confidence of an
     /// outlier-free 7-sample at 50% outliers needs 588; 500 is near).
+    #[cfg_attr(feature = "cli", arg(skip))]
     pub iterations: usize,
     /// Inlier threshold in robust standard deviations (default 2.5).
+    #[cfg_attr(feature = "cli", arg(skip))]
     pub inlier_sigmas: f64,
     /// Lower bound of σ̂ in px, so near-perfect data keep a sane threshold
     /// (default 0.25 px).
+    #[cfg_attr(feature = "cli", arg(skip))]
     pub min_sigma_px: f64,
     /// Model selection rule (default inlier ratio).
+    #[cfg_attr(
+        feature = "cli",
+        arg(long = "model-selection", value_enum, required = false)
+    )]
     pub selection: ModelSelection,
     /// For `InlierRatio`: H is chosen when inliers(H) ≥ this × inliers(F)
     /// (default 0.9).
+    #[cfg_attr(feature = "cli", arg(long, required = false))]
     pub h_inlier_ratio: f64,
     /// RNG seed (default 0).
+    #[cfg_attr(feature = "cli", arg(skip))]
     pub seed: u64,
 }
 
