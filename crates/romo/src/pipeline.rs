@@ -86,8 +86,8 @@ pub struct RomoOptions {
     /// Flow is computed on frames of `flow_scale` × the grid (default 2).
     #[cfg_attr(feature = "cli", arg(long, required = false))]
     pub flow_scale: usize,
-    /// Built-in flow parameters (DIS; default [`DisOptions::masks`], finer
-    /// than OpenCV's MEDIUM, which is `DisOptions::default()`: a partial
+    /// Built-in flow parameters (DIS; default [`DisOptions::masks`], which
+    /// is `DisOptions::default()` and finer than OpenCV's MEDIUM: a partial
     /// `flow` object in JSON overrides fields of that preset).
     #[cfg_attr(feature = "cli", arg(skip))]
     pub flow: DisOptions,
