@@ -8,6 +8,9 @@ mod pipeline;
 mod plan;
 mod preflight;
 mod report;
+#[cfg(test)]
+#[path = "../tests/common/mtime.rs"]
+mod test_mtime;
 
 use clap::Parser;
 pub use ctx::Ctx;

@@ -302,21 +302,13 @@ pub fn decide(
 mod tests {
     #![allow(clippy::unwrap_used, clippy::expect_used)]
     use super::*;
+    use crate::test_mtime::set_mtime;
     use serde_json::json;
     use std::time::{Duration, SystemTime};
 
     fn write(p: &Path, bytes: &[u8]) {
         std::fs::create_dir_all(p.parent().unwrap()).unwrap();
         std::fs::write(p, bytes).unwrap();
-    }
-
-    fn set_mtime(p: &Path, t: SystemTime) {
-        std::fs::File::options()
-            .write(true)
-            .open(p)
-            .unwrap()
-            .set_modified(t)
-            .unwrap();
     }
 
     /// Record a stage as done now, as `run` does.

@@ -4,6 +4,7 @@
 //! free disk space for the planned outputs — and reject contradictory flags.
 //! Every problem is one line; all of them are reported at once.
 
+use crate::cmd::train::BackendKind;
 use std::path::{Path, PathBuf};
 use std::process::Command;
 
@@ -30,8 +31,8 @@ pub struct Request<'a> {
     pub mask_options: Option<&'a Path>,
     /// `--from` stage name, if any.
     pub from: Option<&'a str>,
-    /// Training backend: "auto", "wgpu" or "cpu".
-    pub backend: &'a str,
+    /// Training backend.
+    pub backend: BackendKind,
     /// Most splats training may make (for the disk estimate).
     pub max_splats: usize,
 }
@@ -169,13 +170,13 @@ pub fn check(r: &Request) -> Preflight {
         ));
     }
     match r.backend {
-        "cpu" => pf.notes.push(format!(
+        BackendKind::Cpu => pf.notes.push(format!(
             "training on the CPU reference backend ({} threads); wgpu on Mesa's lavapipe is as fast on small scenes and faster with many splats",
             rayon::current_num_threads()
         )),
         backend => match wgpu_adapter() {
             Ok(_) => {}
-            Err(e) if backend == "wgpu" => {
+            Err(e) if backend == BackendKind::Wgpu => {
                 pf.problems.push(format!("--backend wgpu: no usable adapter ({e})"))
             }
             Err(e) => pf.notes.push(format!(
@@ -201,18 +202,13 @@ pub fn check(r: &Request) -> Preflight {
 
 /// Check everything the stages need before stage 1; every problem is one line.
 pub fn for_run(args: &crate::cmd::run::Args, ctx: &crate::Ctx) -> anyhow::Result<()> {
-    let backend = match args.backend {
-        crate::cmd::train::BackendKind::Auto => "auto",
-        crate::cmd::train::BackendKind::Wgpu => "wgpu",
-        crate::cmd::train::BackendKind::Cpu => "cpu",
-    };
     let steps = args.steps.unwrap_or(crate::plan::MAX_STEPS as u32);
     let max_splats = crate::cmd::train_common::short_schedule(steps, true)
         .strategy
         .max_splats;
     let pf = check(&Request {
-        video: args.video.as_deref(),
-        scene: args.scene.as_deref(),
+        video: args.input.video.as_deref(),
+        scene: args.input.scene.as_deref(),
         out: &args.out,
         fps: args.fps,
         ffmpeg: &args.ffmpeg,
@@ -225,7 +221,7 @@ pub fn for_run(args: &crate::cmd::run::Args, ctx: &crate::Ctx) -> anyhow::Result
         no_masks: args.no_masks,
         mask_options: args.mask_options.as_deref(),
         from: args.from.map(crate::pipeline::Stage::name),
-        backend,
+        backend: args.backend,
         max_splats,
     });
     for n in &pf.notes {
@@ -257,7 +253,7 @@ mod tests {
             no_masks: false,
             mask_options: None,
             from: None,
-            backend: "cpu",
+            backend: BackendKind::Cpu,
             max_splats: 1000,
         }
     }

@@ -6,28 +6,12 @@
 #![allow(clippy::unwrap_used, clippy::expect_used)]
 
 use std::path::{Path, PathBuf};
-use std::process::{Command, Output};
+use std::process::Command;
 use std::time::{Duration, SystemTime};
 
-fn romosplat_raw(args: &[&str]) -> Output {
-    Command::new(env!("CARGO_BIN_EXE_romosplat"))
-        .args(args)
-        .arg("--json")
-        .arg("--quiet")
-        .env("XDG_RUNTIME_DIR", std::env::temp_dir())
-        .output()
-        .unwrap()
-}
-
-fn romosplat(args: &[&str]) -> serde_json::Value {
-    let out = romosplat_raw(args);
-    assert!(
-        out.status.success(),
-        "romosplat {args:?} failed: {}",
-        String::from_utf8_lossy(&out.stderr)
-    );
-    serde_json::from_slice(&out.stdout).unwrap()
-}
+mod common;
+use common::mtime::set_mtime;
+use common::{romosplat, romosplat_raw};
 
 /// The stages a run ran, in order.
 fn ran(v: &serde_json::Value) -> Vec<String> {
@@ -71,15 +55,6 @@ fn scene_without_split(src: &Path, dst: &Path, names: &[String]) {
         let e = e.unwrap();
         std::fs::copy(e.path(), dst.join("sparse/0").join(e.file_name())).unwrap();
     }
-}
-
-fn set_mtime(p: &Path, t: SystemTime) {
-    std::fs::File::options()
-        .write(true)
-        .open(p)
-        .unwrap()
-        .set_modified(t)
-        .unwrap();
 }
 
 #[test]

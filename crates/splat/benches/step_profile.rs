@@ -12,7 +12,7 @@
 #![allow(clippy::unwrap_used, clippy::expect_used)]
 
 use loader::scene::{Scene, SceneOptions};
-use splat::backend::{LossConfig, StepInput};
+use splat::backend::LossConfig;
 use splat::gpu::profile_step;
 use splat::train::TrainOptions;
 use splat::train::data::{initial_splats, load_views, scene_extent};
@@ -42,18 +42,14 @@ fn main() {
     };
     let sh_degree: u32 = env_or("STEP_BENCH_SH", 3);
     let v = &views[0];
-    let input = StepInput {
-        camera: &v.camera,
-        target: &v.image,
-        mask: v.mask.as_deref(),
-        view_id: Some(v.index),
-        lr: opts.learning_rates(0, extent),
-        loss: LossConfig::default(),
-        render: RenderOptions {
+    let input = v.step_input(
+        opts.learning_rates(0, extent),
+        LossConfig::default(),
+        RenderOptions {
             sh_degree,
             ..Default::default()
         },
-    };
+    );
     let prof = profile_step(&splats, &input, 1, steps).unwrap();
     let r = |x: f64| (x * 10.0).round() / 10.0;
     let ms: serde_json::Map<String, serde_json::Value> =

@@ -82,49 +82,44 @@ fn check(s: &Splats, cam: &RenderCamera, opts: &RenderOptions, seed: u64) {
     let vp = rasterize_backward_t(&p, rr, cam, opts, &cot);
     let g = project_backward_t(s, cam, opts, &vp);
     let n = s.len();
-    let (mut a, mut num) = (vec![], vec![]);
-    for i in 0..n {
-        for k in 0..3 {
-            a.push(g.means[i][k]);
-            num.push(fd(s, cam, opts, &cot, &|t| &mut t.means[i][k]));
-        }
-    }
-    compare("means", &a, &num);
-    let (mut a, mut num) = (vec![], vec![]);
-    for i in 0..n {
-        for k in 0..3 {
-            a.push(g.log_scales[i][k]);
-            num.push(fd(s, cam, opts, &cot, &|t| &mut t.log_scales[i][k]));
-        }
-    }
-    compare("log_scales", &a, &num);
-    let (mut a, mut num) = (vec![], vec![]);
-    for i in 0..n {
-        for k in 0..4 {
-            a.push(g.rotations[i][k]);
-            num.push(fd(s, cam, opts, &cot, &|t| &mut t.rotations[i][k]));
-        }
-    }
-    compare("rotations", &a, &num);
-    let a: Vec<f64> = g.opacity_logits.clone();
-    let num: Vec<f64> = (0..n)
-        .map(|i| fd(s, cam, opts, &cot, &|t| &mut t.opacity_logits[i]))
-        .collect();
-    compare("opacity_logits", &a, &num);
-    let active = splat::types::sh_coeffs(opts.sh_degree.min(s.sh_degree)) * 3;
-    let k3 = s.coeffs_per_channel() * 3;
-    for (lo, hi, name) in [(0, 3, "sh_dc"), (3, active, "sh_rest")] {
-        if hi <= lo {
-            continue;
-        }
+    // The analytic gradient of `width` values per splat against central
+    // differences of the parameters `param` reaches.
+    let group = |name: &str,
+                 width: usize,
+                 analytic: &dyn Fn(usize, usize) -> f64,
+                 param: &dyn Fn(&mut Splats, usize, usize) -> &mut f32| {
         let (mut a, mut num) = (vec![], vec![]);
         for i in 0..n {
-            for c in lo..hi {
-                a.push(g.sh[i * k3 + c]);
-                num.push(fd(s, cam, opts, &cot, &|t| &mut t.sh[i * k3 + c]));
+            for k in 0..width {
+                a.push(analytic(i, k));
+                num.push(fd(s, cam, opts, &cot, &|t| param(t, i, k)));
             }
         }
         compare(name, &a, &num);
+    };
+    group("means", 3, &|i, k| g.means[i][k], &|t, i, k| {
+        &mut t.means[i][k]
+    });
+    group("log_scales", 3, &|i, k| g.log_scales[i][k], &|t, i, k| {
+        &mut t.log_scales[i][k]
+    });
+    group("rotations", 4, &|i, k| g.rotations[i][k], &|t, i, k| {
+        &mut t.rotations[i][k]
+    });
+    group(
+        "opacity_logits",
+        1,
+        &|i, _| g.opacity_logits[i],
+        &|t, i, _| &mut t.opacity_logits[i],
+    );
+    let active = splat::types::sh_coeffs(opts.sh_degree.min(s.sh_degree)) * 3;
+    let k3 = s.coeffs_per_channel() * 3;
+    for (lo, hi, name) in [(0, 3, "sh_dc"), (3, active, "sh_rest")] {
+        if hi > lo {
+            group(name, hi - lo, &|i, c| g.sh[i * k3 + lo + c], &|t, i, c| {
+                &mut t.sh[i * k3 + lo + c]
+            });
+        }
     }
     // Inactive SH coefficients get exactly zero gradient.
     for i in 0..n {

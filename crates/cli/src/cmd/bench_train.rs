@@ -8,7 +8,7 @@ use super::train::{BackendKind, make_backend, split_views};
 use crate::Ctx;
 use anyhow::Context;
 use loader::{Scene, SceneOptions};
-use splat::backend::{LossConfig, StepInput};
+use splat::backend::LossConfig;
 use splat::train::data::{initial_splats, load_views, scene_extent};
 use splat::train::{TrainOptions, fresh_start};
 use splat::types::RenderOptions;
@@ -89,18 +89,14 @@ pub fn run(args: &Args, ctx: &Ctx) -> anyhow::Result<serde_json::Value> {
         let mut times = Vec::new();
         for s in 0..args.steps + 3 {
             let v = &views[s as usize % views.len()];
-            let input = StepInput {
-                camera: &v.camera,
-                target: &v.image,
-                mask: v.mask.as_deref(),
-                view_id: Some(v.index),
-                lr: opts.learning_rates(s, extent),
-                loss: LossConfig::default(),
-                render: RenderOptions {
+            let input = v.step_input(
+                opts.learning_rates(s, extent),
+                LossConfig::default(),
+                RenderOptions {
                     sh_degree: 3,
                     ..Default::default()
                 },
-            };
+            );
             let t = Instant::now();
             b.step(&input)?;
             if s >= 3 {
@@ -126,18 +122,14 @@ pub fn run(args: &Args, ctx: &Ctx) -> anyhow::Result<serde_json::Value> {
     let mut out = serde_json::json!({ "scene": root, "results": results });
     if args.profile && args.backend != Which::Cpu {
         let v = &views[0];
-        let input = StepInput {
-            camera: &v.camera,
-            target: &v.image,
-            mask: v.mask.as_deref(),
-            view_id: Some(v.index),
-            lr: opts.learning_rates(0, extent),
-            loss: LossConfig::default(),
-            render: RenderOptions {
+        let input = v.step_input(
+            opts.learning_rates(0, extent),
+            LossConfig::default(),
+            RenderOptions {
                 sh_degree: 3,
                 ..Default::default()
             },
-        };
+        );
         let prof = splat::gpu::profile_step(&start.splats, &input, 2, args.steps.max(1) as usize)?;
         let map: serde_json::Map<String, serde_json::Value> = prof
             .into_iter()

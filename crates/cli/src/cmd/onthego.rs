@@ -136,21 +136,27 @@ fn gt_masks(scene: &Scene, dir: &Path) -> Result<usize> {
     Ok(n)
 }
 
+/// One row's cells: variant, PSNR, SSIM, LPIPS (`missing` when absent),
+/// splats, minutes, with `extra` more decimals than the Markdown table's.
+fn cells(r: &Row, extra: usize, missing: &str) -> [String; 6] {
+    [
+        r.variant.clone(),
+        format!("{:.*}", 2 + extra, r.psnr),
+        format!("{:.*}", 3 + extra, r.ssim),
+        r.lpips
+            .map_or(missing.into(), |l| format!("{:.*}", 3 + extra, l)),
+        r.splats.to_string(),
+        format!("{:.*}", 1 + extra, r.minutes),
+    ]
+}
+
 /// The table as Markdown.
 pub fn markdown(rows: &[Row]) -> String {
     let mut s = String::from(
         "| variant | PSNR ↑ | SSIM ↑ | LPIPS ↓ | splats | minutes |\n|---|---|---|---|---|---|\n",
     );
     for r in rows {
-        s += &format!(
-            "| {} | {:.2} | {:.3} | {} | {} | {:.1} |\n",
-            r.variant,
-            r.psnr,
-            r.ssim,
-            r.lpips.map_or("—".into(), |l| format!("{l:.3}")),
-            r.splats,
-            r.minutes
-        );
+        s += &format!("| {} |\n", cells(r, 0, "—").join(" | "));
     }
     s
 }
@@ -159,15 +165,7 @@ pub fn markdown(rows: &[Row]) -> String {
 pub fn csv(rows: &[Row]) -> String {
     let mut s = String::from("variant,psnr,ssim,lpips,splats,minutes\n");
     for r in rows {
-        s += &format!(
-            "{},{:.4},{:.5},{},{},{:.3}\n",
-            r.variant,
-            r.psnr,
-            r.ssim,
-            r.lpips.map_or(String::new(), |l| format!("{l:.5}")),
-            r.splats,
-            r.minutes
-        );
+        s += &format!("{}\n", cells(r, 2, "").join(","));
     }
     s
 }

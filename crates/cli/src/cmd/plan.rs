@@ -5,22 +5,17 @@
 use super::pose::PoseOpts;
 use super::train::{BackendKind, make_backend};
 use crate::Ctx;
-use crate::plan::{Fixed, Input, Rates, plan, probe_scene, probe_train_rates, probe_video};
-use std::path::PathBuf;
+use crate::plan::{Fixed, Input, Rates, plan, probe_train_rates};
 
 /// Splats in the training-rate probe (a typical mid-run count).
 const PROBE_SPLATS: usize = 30_000;
 
 /// `romosplat plan`
 #[derive(Debug, clap::Args)]
-#[command(group(clap::ArgGroup::new("input").required(true).args(["video", "scene"])))]
 pub struct Args {
-    /// A video file (frame count and size read with ffprobe).
-    #[arg(long)]
-    pub video: Option<PathBuf>,
-    /// A scene folder with `images/`.
-    #[arg(long)]
-    pub scene: Option<PathBuf>,
+    /// The input (a video's frame count and size are read with ffprobe).
+    #[command(flatten)]
+    pub input: super::run::InputArgs,
     /// Wall-time budget for the whole run, minutes.
     #[arg(long, default_value_t = 20.0)]
     pub budget_minutes: f64,
@@ -73,14 +68,7 @@ pub fn plan_for(
 
 /// Run `romosplat plan`.
 pub fn run(args: &Args, ctx: &Ctx) -> anyhow::Result<serde_json::Value> {
-    let (frames, w, h) = match (&args.video, &args.scene) {
-        (Some(v), _) => {
-            let info = probe_video(std::path::Path::new("ffmpeg"), v)?;
-            (info.frames, info.width, info.height)
-        }
-        (None, Some(s)) => probe_scene(s)?,
-        (None, None) => anyhow::bail!("give --video or --scene"),
-    };
+    let (frames, w, h) = args.input.probe(std::path::Path::new("ffmpeg"), None)?;
     let mut colmap = pose::ColmapOptions::default();
     args.pose.apply(&mut colmap)?;
     let fixed = Fixed {

@@ -24,16 +24,46 @@ use splat::export::ExportFormat;
 use std::path::{Path, PathBuf};
 use std::time::Instant;
 
-/// `romosplat run`
-#[derive(Debug, clap::Args)]
-#[command(group(clap::ArgGroup::new("input").required(true).args(["video", "scene"])))]
-pub struct Args {
+/// The input of `run` and `plan`: exactly one of a video and a scene folder.
+#[derive(Debug, Clone, clap::Args)]
+#[group(id = "input", required = true, multiple = false)]
+pub struct InputArgs {
     /// A video file (frames are extracted with ffmpeg).
     #[arg(long)]
     pub video: Option<PathBuf>,
     /// A scene folder with `images/` (never modified).
     #[arg(long)]
     pub scene: Option<PathBuf>,
+}
+
+impl InputArgs {
+    /// Where the frames come from.
+    pub fn source(&self) -> Result<Source> {
+        match (&self.video, &self.scene) {
+            (Some(v), None) => Ok(Source::Video(v.clone())),
+            (None, Some(s)) => Ok(Source::Scene(s.clone())),
+            _ => bail!("give exactly one of --video and --scene"),
+        }
+    }
+
+    /// Frame count and size of the input: the video's (probed with the
+    /// ffprobe beside `ffmpeg`, at `fps` when given) or the scene's images.
+    pub fn probe(&self, ffmpeg: &Path, fps: Option<f64>) -> Result<(usize, u32, u32)> {
+        match self.source()? {
+            Source::Video(v) => {
+                let info = crate::plan::probe_video(ffmpeg, &v)?;
+                Ok((info.frames_at(fps), info.width, info.height))
+            }
+            Source::Scene(s) => crate::plan::probe_scene(&s),
+        }
+    }
+}
+
+/// `romosplat run`
+#[derive(Debug, clap::Args)]
+pub struct Args {
+    #[command(flatten)]
+    pub input: InputArgs,
     /// Output folder.
     #[arg(long)]
     pub out: PathBuf,
@@ -135,11 +165,7 @@ pub struct Plan {
 impl Plan {
     /// Resolve the flags; `budget` supplies what they leave unset.
     pub fn new(args: &Args, budget: &Budget) -> Result<Plan> {
-        let source = match (&args.video, &args.scene) {
-            (Some(v), None) => Source::Video(v.clone()),
-            (None, Some(s)) => Source::Scene(s.clone()),
-            _ => bail!("give exactly one of --video and --scene"),
-        };
+        let source = args.input.source()?;
         let video = matches!(source, Source::Video(_));
         let mut romo = match &args.mask_options {
             Some(p) => super::mask::read_options(p)?,
@@ -326,6 +352,22 @@ pub struct StageDef {
     pub restore: fn(&mut Results, serde_json::Value) -> Result<()>,
 }
 
+/// Keep a stage's result in its `Results` slot and return it serialised.
+fn store<T: Serialize>(slot: &mut Option<T>, result: T) -> Result<serde_json::Value> {
+    let v = serde_json::to_value(&result)?;
+    *slot = Some(result);
+    Ok(v)
+}
+
+/// Put a recorded result back into its `Results` slot.
+fn restore_into<T: serde::de::DeserializeOwned>(
+    slot: &mut Option<T>,
+    v: serde_json::Value,
+) -> Result<()> {
+    *slot = Some(serde_json::from_value(v)?);
+    Ok(())
+}
+
 /// The stages, in order.
 pub fn stages() -> [StageDef; 8] {
     [
@@ -352,10 +394,7 @@ pub fn stages() -> [StageDef; 8] {
                 Ok(json!({ "source": p.source, "fps": p.fps, "keep_poses": p.keep_poses }))
             },
             run: run_frames,
-            restore: |r, v| {
-                r.frames = Some(serde_json::from_value(v)?);
-                Ok(())
-            },
+            restore: |r, v| restore_into(&mut r.frames, v),
         },
         StageDef {
             stage: Stage::Mask,
@@ -371,14 +410,9 @@ pub fn stages() -> [StageDef; 8] {
                 clear(&p.masks())?;
                 clear(&p.scene.join("motion"))?;
                 let rep = MaskOutcome::new(&super::mask::segment(&p.scene, 1, &p.romo, ctx)?);
-                let v = serde_json::to_value(&rep)?;
-                r.mask = Some(rep);
-                Ok(v)
+                store(&mut r.mask, rep)
             },
-            restore: |r, v| {
-                r.mask = Some(serde_json::from_value(v)?);
-                Ok(())
-            },
+            restore: |r, v| restore_into(&mut r.mask, v),
         },
         StageDef {
             stage: Stage::Keyframes,
@@ -397,10 +431,7 @@ pub fn stages() -> [StageDef; 8] {
             outputs: |p| vec![p.posed_scene().join("images")],
             options: |p| Ok(json!({ "keyframes": p.keyframes, "masks": !p.no_masks })),
             run: run_keyframes,
-            restore: |r, v| {
-                r.keyframes = Some(serde_json::from_value(v)?);
-                Ok(())
-            },
+            restore: |r, v| restore_into(&mut r.keyframes, v),
         },
         StageDef {
             stage: Stage::Pose,
@@ -420,14 +451,9 @@ pub fn stages() -> [StageDef; 8] {
                 let paths = pose::ColmapPaths::for_scene(&posed);
                 let rep = super::pose::colmap(&paths, &p.colmap, ctx)
                     .with_context(|| format!("pose stage on {}", posed.display()))?;
-                let v = serde_json::to_value(&rep)?;
-                r.pose = Some(rep);
-                Ok(v)
+                store(&mut r.pose, rep)
             },
-            restore: |r, v| {
-                r.pose = Some(serde_json::from_value(v)?);
-                Ok(())
-            },
+            restore: |r, v| restore_into(&mut r.pose, v),
         },
         StageDef {
             stage: Stage::Train,
@@ -437,14 +463,9 @@ pub fn stages() -> [StageDef; 8] {
             options: |p| train_options(p, &p.train),
             run: |p, r, ctx| {
                 let o = train_into(p, p.train.clone(), &p.train_dir(), ctx)?;
-                let v = serde_json::to_value(&o)?;
-                r.train = Some(o);
-                Ok(v)
+                store(&mut r.train, o)
             },
-            restore: |r, v| {
-                r.train = Some(serde_json::from_value(v)?);
-                Ok(())
-            },
+            restore: |r, v| restore_into(&mut r.train, v),
         },
         StageDef {
             stage: Stage::Baseline,
@@ -462,14 +483,9 @@ pub fn stages() -> [StageDef; 8] {
             options: |p| train_options(p, &p.baseline_options()),
             run: |p, r, ctx| {
                 let o = train_into(p, p.baseline_options(), &p.baseline_dir(), ctx)?;
-                let v = serde_json::to_value(&o)?;
-                r.baseline = Some(o);
-                Ok(v)
+                store(&mut r.baseline, o)
             },
-            restore: |r, v| {
-                r.baseline = Some(serde_json::from_value(v)?);
-                Ok(())
-            },
+            restore: |r, v| restore_into(&mut r.baseline, v),
         },
         StageDef {
             stage: Stage::Export,
@@ -487,14 +503,9 @@ pub fn stages() -> [StageDef; 8] {
                     options: Default::default(),
                 };
                 let o = super::export::export_splats(&job, ctx)?;
-                let v = serde_json::to_value(&o)?;
-                r.export = Some(o);
-                Ok(v)
+                store(&mut r.export, o)
             },
-            restore: |r, v| {
-                r.export = Some(serde_json::from_value(v)?);
-                Ok(())
-            },
+            restore: |r, v| restore_into(&mut r.export, v),
         },
         StageDef {
             stage: Stage::Report,
@@ -620,9 +631,7 @@ fn run_frames(p: &Plan, r: &mut Results, ctx: &Ctx) -> Result<serde_json::Value>
             }
         }
     };
-    let v = serde_json::to_value(&outcome)?;
-    r.frames = Some(outcome);
-    Ok(v)
+    store(&mut r.frames, outcome)
 }
 
 /// Keyframes: link the sharp, non-duplicate frames (and their masks) into `OUT/keyframes`.
@@ -646,9 +655,7 @@ fn run_keyframes(p: &Plan, r: &mut Results, ctx: &Ctx) -> Result<serde_json::Val
         "  kept {} of {} frames ({} blurry, {} near-duplicates dropped)",
         outcome.kept, outcome.frames, outcome.blurry, outcome.duplicates
     ));
-    let v = serde_json::to_value(&outcome)?;
-    r.keyframes = Some(outcome);
-    Ok(v)
+    store(&mut r.keyframes, outcome)
 }
 
 /// The time-budget plan for this run. It is kept in `OUT/plan.json` with
@@ -656,14 +663,7 @@ fn run_keyframes(p: &Plan, r: &mut Results, ctx: &Ctx) -> Result<serde_json::Val
 /// reused while those stay the same: a rerun neither probes the adapter
 /// again nor sees a slightly different probe change its stages' options.
 fn budget(args: &Args, ctx: &Ctx) -> Result<Budget> {
-    let (frames, width, height) = match (&args.video, &args.scene) {
-        (Some(v), _) => {
-            let info = crate::plan::probe_video(&args.ffmpeg, v)?;
-            (info.frames_at(args.fps), info.width, info.height)
-        }
-        (None, Some(s)) => crate::plan::probe_scene(s)?,
-        (None, None) => bail!("give --video or --scene"),
-    };
+    let (frames, width, height) = args.input.probe(&args.ffmpeg, args.fps)?;
     let input = crate::plan::Input {
         frames,
         width,

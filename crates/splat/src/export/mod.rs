@@ -1,5 +1,5 @@
 //! Splat exports: the formats other tools read, and the clean-up pass run
-//! before exporting (issue 6, "Exports").
+//! before exporting.
 //!
 //! - `.ply`: the INRIA 3DGS layout, our exchange format (written by
 //!   `crate::io`, this module only dispatches);

@@ -3,6 +3,7 @@
 #![allow(clippy::unwrap_used, clippy::expect_used)]
 
 use super::*;
+use crate::strategy::opacities;
 use crate::types::{AdamState, DensifyStats, Splats};
 
 const EXTENT: f32 = 10.0;
@@ -112,12 +113,7 @@ fn opacity_reset_caps_opacity_and_zeroes_its_moments() {
     st.splats.opacity_logits = vec![logit(0.9), logit(0.006)];
     let rep = refine(DefaultStrategyOptions::default(), 3000, &mut st);
     assert!(rep.opacity_reset);
-    let o: Vec<f32> = st
-        .splats
-        .opacity_logits
-        .iter()
-        .map(|&l| sigmoid(l))
-        .collect();
+    let o = opacities(&st.splats);
     assert!(
         (o[0] - 0.01).abs() < 1e-6 && (o[1] - 0.006).abs() < 1e-6,
         "{o:?}"

@@ -15,7 +15,7 @@
 //! opacity and scale ([`Strategy::regularization`]) and SGLD noise on the
 //! means ([`Strategy::means_noise`], gsplat `inject_noise_to_position`).
 
-use super::{ModelState, RefineReport, SceneInfo, Strategy, logit, push_splat, sigmoid};
+use super::{ModelState, RefineReport, SceneInfo, Strategy, logit, opacities, push_splat, sigmoid};
 use crate::backend::{MeansNoise, Regularization};
 use crate::types::Splats;
 use rand::{Rng, SeedableRng};
@@ -199,12 +199,7 @@ fn copy_splat(s: &mut Splats, from: usize, to: usize) {
 
 /// Move dead splats onto live ones (gsplat `relocate`). Returns how many moved.
 pub fn relocate<R: Rng>(state: &mut ModelState, min_opacity: f32, rng: &mut R) -> usize {
-    let op: Vec<f32> = state
-        .splats
-        .opacity_logits
-        .iter()
-        .map(|&l| sigmoid(l))
-        .collect();
+    let op = opacities(&state.splats);
     // NaN opacities count as dead too.
     let (dead, alive): (Vec<usize>, Vec<usize>) =
         (0..op.len()).partition(|&i| op[i].is_nan() || op[i] <= min_opacity);
@@ -238,12 +233,7 @@ pub fn grow<R: Rng>(
     if add == 0 {
         return 0;
     }
-    let op: Vec<f32> = state
-        .splats
-        .opacity_logits
-        .iter()
-        .map(|&l| sigmoid(l))
-        .collect();
+    let op = opacities(&state.splats);
     let all: Vec<usize> = (0..n).collect();
     let sampled = sample_weighted(&all, &op, add, rng);
     if sampled.is_empty() {

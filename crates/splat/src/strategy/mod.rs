@@ -203,6 +203,11 @@ pub fn sigmoid(x: f32) -> f32 {
     1.0 / (1.0 + (-x).exp())
 }
 
+/// Every splat's opacity (the sigmoid of its logit).
+pub fn opacities(splats: &Splats) -> Vec<f32> {
+    splats.opacity_logits.iter().map(|&l| sigmoid(l)).collect()
+}
+
 /// Rotation matrix of a (not necessarily unit) quaternion (w, x, y, z).
 pub fn rotation(q: [f32; 4]) -> [[f32; 3]; 3] {
     let n = (q[0] * q[0] + q[1] * q[1] + q[2] * q[2] + q[3] * q[3])

@@ -4,9 +4,10 @@
 //! (skipping points seen mostly on moving pixels) or at random.
 
 use super::options::{InitMode, TrainOptions};
+use crate::backend::{LearningRates, LossConfig, StepInput};
 use crate::error::{Result, SplatError};
 use crate::init::{ObservedPoint, filter_points, random_splats, splats_from_points};
-use crate::types::{RenderCamera, Splats};
+use crate::types::{RenderCamera, RenderOptions, Splats};
 use loader::Scene;
 use serde::{Deserialize, Serialize};
 use std::collections::HashMap;
@@ -22,6 +23,27 @@ pub struct View {
     pub image: Vec<f32>,
     /// Keep weights (`w×h`, 1 keep / 0 moving) when masks are used.
     pub mask: Option<Vec<f32>>,
+}
+
+impl View {
+    /// One training step on this view with these rates, loss and render
+    /// options (the view's index is its device-cache id).
+    pub fn step_input(
+        &self,
+        lr: LearningRates,
+        loss: LossConfig,
+        render: RenderOptions,
+    ) -> StepInput<'_> {
+        StepInput {
+            camera: &self.camera,
+            target: &self.image,
+            mask: self.mask.as_deref(),
+            view_id: Some(self.index),
+            lr,
+            loss,
+            render,
+        }
+    }
 }
 
 /// Views to train on and the scene extent.

@@ -15,7 +15,7 @@ pub mod options;
 pub use data::{InitReport, TrainData, View};
 pub use options::{InitMode, TrainOptions};
 
-use crate::backend::{LossConfig, StepInput, TrainBackend};
+use crate::backend::{LossConfig, TrainBackend};
 use crate::error::Result;
 use crate::io::{Checkpoint, write_checkpoint};
 use crate::strategy::{
@@ -150,22 +150,18 @@ impl Trainer<'_> {
             } else {
                 o.background
             };
-            let input = StepInput {
-                camera: &view.camera,
-                target: &view.image,
-                mask: view.mask.as_deref(),
-                view_id: Some(view.index),
-                lr: o.learning_rates(s, self.data.extent),
-                loss: LossConfig {
+            let input = view.step_input(
+                o.learning_rates(s, self.data.extent),
+                LossConfig {
                     ssim_weight: o.ssim_weight,
                 },
-                render: RenderOptions {
+                RenderOptions {
                     background,
                     sh_degree: o.active_sh_degree(s),
                     low_pass: o.low_pass,
                     antialiased: o.antialiased,
                 },
-            };
+            );
             let st = self.backend.step(&input)?;
             let done = s + 1;
             if strategy.wants_refine(done) {

@@ -133,33 +133,21 @@ fn run(c: &GpuContext) {
         let g = read_grads(c, &grads, &params).unwrap();
         let rg = reference::project_backward(&splats, &cam, &opts, &ref_vp);
         let flat3 = |v: &[[f32; 3]]| v.iter().flatten().copied().collect::<Vec<f32>>();
-        check(
-            &format!("case {ci} means"),
-            &flat3(&g.means),
-            &flat3(&rg.means),
-        );
-        check(
-            &format!("case {ci} log_scales"),
-            &flat3(&g.log_scales),
-            &flat3(&rg.log_scales),
-        );
-        let r4 = |v: &[[f32; 4]]| v.iter().flatten().copied().collect::<Vec<f32>>();
-        check(
-            &format!("case {ci} rotations"),
-            &r4(&g.rotations),
-            &r4(&rg.rotations),
-        );
-        check(
-            &format!("case {ci} opacity"),
-            &g.opacity_logits,
-            &rg.opacity_logits,
-        );
-        check(&format!("case {ci} sh"), &g.sh, &rg.sh);
-        check(
-            &format!("case {ci} mean2d_abs"),
-            &g.mean2d_abs,
-            &rg.mean2d_abs,
-        );
+        let flat4 = |v: &[[f32; 4]]| v.iter().flatten().copied().collect::<Vec<f32>>();
+        for (name, gpu, cpu) in [
+            ("means", flat3(&g.means), flat3(&rg.means)),
+            ("log_scales", flat3(&g.log_scales), flat3(&rg.log_scales)),
+            ("rotations", flat4(&g.rotations), flat4(&rg.rotations)),
+            (
+                "opacity",
+                g.opacity_logits.clone(),
+                rg.opacity_logits.clone(),
+            ),
+            ("sh", g.sh.clone(), rg.sh.clone()),
+            ("mean2d_abs", g.mean2d_abs.clone(), rg.mean2d_abs.clone()),
+        ] {
+            check(&format!("case {ci} {name}"), &gpu, &cpu);
+        }
     }
 }
 

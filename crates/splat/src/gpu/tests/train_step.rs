@@ -8,12 +8,9 @@ use crate::gpu::adam::{Adam, AdamArgs, AdamUniforms};
 use crate::gpu::kernel::Recorder;
 use crate::reference::backend::CpuBackend;
 use crate::train::adam::AdamConfig;
-use crate::types::{AdamState, RenderOptions, Splats};
+use crate::types::{AdamState, RenderCamera, RenderOptions, Splats};
 use rand::{Rng, SeedableRng};
 
-/// Uniforms of one Adam step `t` (1-based) over `splats` rows of `row`
-/// floats, the first `width` of each updated; columns < `head` use
-/// `lr_head`; `sparse` is sparse mode.
 /// The learning rates of these tests: INRIA's, with the position rate given.
 fn rates(means: f32) -> LearningRates {
     LearningRates {
@@ -26,6 +23,34 @@ fn rates(means: f32) -> LearningRates {
     }
 }
 
+/// A random `w×h` RGB target in [0, 1).
+fn random_image(r: &mut rand_pcg::Pcg64, w: u32, h: u32) -> Vec<f32> {
+    (0..w * h * 3)
+        .map(|_| r.random_range(0.0f32..1.0))
+        .collect()
+}
+
+/// One L1-only step towards `target` without mask or device cache, at
+/// `rates(1e-3)`.
+fn plain_input<'a>(
+    camera: &'a RenderCamera,
+    target: &'a [f32],
+    render: RenderOptions,
+) -> StepInput<'a> {
+    StepInput {
+        camera,
+        target,
+        mask: None,
+        view_id: None,
+        lr: rates(1e-3),
+        loss: LossConfig { ssim_weight: 0.0 },
+        render,
+    }
+}
+
+/// Uniforms of one Adam step `t` (1-based) over `splats` rows of `row`
+/// floats, the first `width` of each updated; columns < `head` use
+/// `lr_head`; `sparse` is sparse mode.
 fn adam_uniforms(
     cfg: &AdamConfig,
     t: i32,
@@ -189,9 +214,7 @@ fn gpu_step_matches_cpu_step() {
     let cam = camera(w, h);
     let s = random_splats(300, 1, 55, false);
     let mut r = rand_pcg::Pcg64::seed_from_u64(56);
-    let target: Vec<f32> = (0..w * h * 3)
-        .map(|_| r.random_range(0.0f32..1.0))
-        .collect();
+    let target = random_image(&mut r, w, h);
     // Mask out a block of "moving" pixels.
     let mask: Vec<f32> = (0..w * h)
         .map(|i| {
@@ -298,13 +321,8 @@ fn reused_buffers_give_the_same_step() {
         antialiased: false,
     };
     let mut r = rand_pcg::Pcg64::seed_from_u64(71);
-    let mut target = |w: u32, h: u32| -> Vec<f32> {
-        (0..w * h * 3)
-            .map(|_| r.random_range(0.0f32..1.0))
-            .collect()
-    };
     let (big_cam, small_cam) = (camera(96, 80), camera(64, 48));
-    let (big_t, small_t) = (target(96, 80), target(64, 48));
+    let (big_t, small_t) = (random_image(&mut r, 96, 80), random_image(&mut r, 64, 48));
     let input = |cam, t| StepInput {
         camera: cam,
         target: t,
@@ -372,21 +390,15 @@ fn sparse_adam_backend_leaves_invisible_splats() {
         }
     }
     adam.step = 3;
-    let target: Vec<f32> = (0..64 * 48 * 3)
-        .map(|_| r.random_range(0.0f32..1.0))
-        .collect();
-    let input = StepInput {
-        camera: &cam,
-        target: &target,
-        mask: None,
-        view_id: None,
-        lr: rates(1e-3),
-        loss: LossConfig { ssim_weight: 0.0 },
-        render: RenderOptions {
+    let target = random_image(&mut r, 64, 48);
+    let input = plain_input(
+        &cam,
+        &target,
+        RenderOptions {
             sh_degree: 1,
             ..Default::default()
         },
-    };
+    );
     let k3 = s.sh.len() / s.len();
     let run = |sparse: bool| {
         let mut b = GpuBackend::new(&crate::gpu::GpuOptions::default()).unwrap();
@@ -427,18 +439,8 @@ fn adam_skips_untrained_sh_only_when_its_moments_are_zero() {
     let s = random_splats(150, 3, 91, false);
     let k3 = s.sh.len() / s.len();
     let mut r = rand_pcg::Pcg64::seed_from_u64(92);
-    let target: Vec<f32> = (0..64 * 48 * 3)
-        .map(|_| r.random_range(0.0f32..1.0))
-        .collect();
-    let input = StepInput {
-        camera: &cam,
-        target: &target,
-        mask: None,
-        view_id: None,
-        lr: rates(1e-3),
-        loss: LossConfig { ssim_weight: 0.0 },
-        render: RenderOptions::default(), // SH degree 0
-    };
+    let target = random_image(&mut r, 64, 48);
+    let input = plain_input(&cam, &target, RenderOptions::default()); // SH degree 0
     let mut moving = AdamState::zeros_like(&s);
     moving.step = 4;
     for (k, (m, v)) in moving
