@@ -16,9 +16,9 @@
 //!   `LabelOptions::u_min_gradient`);
 //! - **MLP** `m = clamp(logit(p), −4, 4) / 4` from the refined probability;
 //! - **colour** `c`: the log ratio of a foreground and a background colour
-//!   histogram (8 bins per channel, the whole video), each built from the
-//!   pixels the geometry and MLP evidence put on its side, ÷ 2, clamped to
-//!   ±1.
+//!   histogram (8 bins per channel), ÷ 2, clamped to ±1; local models per
+//!   tile and few frames with the video's model as a prior (see
+//!   `colour_evidence`).
 //!
 //! Unary `a = w_g·g + w_m·m + w_c·c` (source capacity `max(a, 0)`, sink
 //! capacity `max(−a, 0)`). Neighbouring pixels (4-connected) are joined with
@@ -62,7 +62,7 @@ pub struct ObjectOptions {
     /// Weight `w_m` of the MLP's probability (default 1).
     #[cfg_attr(feature = "cli", arg(skip))]
     pub mlp_weight: f32,
-    /// Weight `w_c` of the colour model (default 0.5).
+    /// Weight `w_c` of the colour model (default 1).
     #[cfg_attr(feature = "cli", arg(skip))]
     pub colour_weight: f32,
     /// Weight `λ_s` of the contrast-sensitive spatial smoothness (default 1).
@@ -75,6 +75,16 @@ pub struct ObjectOptions {
     /// residual counts as geometric evidence (default 0.02).
     #[cfg_attr(feature = "cli", arg(skip))]
     pub texture_gradient: f32,
+    /// Side in grid px of the tiles of the local colour model (default 32;
+    /// 0: one colour model for the whole video). Each pixel's model counts
+    /// the seeds of its tile and the 8 around it, over `colour_frames`
+    /// frames either side, with the video's model as a prior.
+    #[cfg_attr(feature = "cli", arg(skip))]
+    pub colour_tile: usize,
+    /// Frames either side of a pixel's own that its local colour model
+    /// counts (default 2).
+    #[cfg_attr(feature = "cli", arg(skip))]
+    pub colour_frames: usize,
 }
 
 impl Default for ObjectOptions {
@@ -83,10 +93,12 @@ impl Default for ObjectOptions {
             method: ObjectMethod::GraphCut,
             geometry_weight: 1.0,
             mlp_weight: 1.0,
-            colour_weight: 0.5,
+            colour_weight: 1.0,
             smoothness: 1.0,
             temporal: 1.0,
             texture_gradient: 0.02,
+            colour_tile: 32,
+            colour_frames: 2,
         }
     }
 }
@@ -190,6 +202,115 @@ fn base_evidence(e: &Evidence, o: &ObjectOptions) -> Vec<Vec<f32>> {
         .collect()
 }
 
+/// Pseudo-samples of the video's colour model in each local model.
+const COLOUR_PRIOR: f64 = 32.0;
+
+/// Colour evidence `c` per frame and pixel: the log ratio of a foreground
+/// and a background colour histogram, ÷ 2, clamped to ±1. Seeds: a pixel
+/// is foreground when it is U or its evidence `a` is positive and it is
+/// not L; background otherwise. With `colour_tile` > 0 each pixel's
+/// histograms count the seeds of its tile and the 8 around it in the
+/// frames within `colour_frames` of its own, plus the video's histograms
+/// scaled to [`COLOUR_PRIOR`] samples: an object whose colour also occurs
+/// elsewhere in the video (a tan animal before a tan wall) is still told
+/// apart from what surrounds it, as in GrabCut's per-image models.
+fn colour_evidence(e: &Evidence, a: &[Vec<f32>], o: &ObjectOptions) -> Vec<Vec<f32>> {
+    let n = a.len();
+    let (w, h) = (e.probs[0].w, e.probs[0].h);
+    let np = w * h;
+    let nb = BINS * BINS * BINS;
+    let bins: Vec<Vec<u16>> = (0..n)
+        .into_par_iter()
+        .map(|t| (0..np).map(|i| colour_bin(&e.rgb[t], i) as u16).collect())
+        .collect();
+    let fg_side = |t: usize, i: usize| e.u[t][i] || (a[t][i] > 0.0 && !e.l[t][i]);
+    let (mut gf, mut gb) = (vec![0f64; nb], vec![0f64; nb]);
+    for (t, bt) in bins.iter().enumerate() {
+        for (i, b) in bt.iter().enumerate() {
+            if fg_side(t, i) {
+                gf[*b as usize] += 1.0;
+            } else {
+                gb[*b as usize] += 1.0;
+            }
+        }
+    }
+    let (nf, nbg): (f64, f64) = (gf.iter().sum(), gb.iter().sum());
+    if nf == 0.0 || nbg == 0.0 {
+        return vec![vec![0.0; np]; n];
+    }
+    // The video's models, Laplace-smoothed.
+    let pf: Vec<f64> = gf.iter().map(|c| (c + 1.0) / (nf + nb as f64)).collect();
+    let pb: Vec<f64> = gb.iter().map(|c| (c + 1.0) / (nbg + nb as f64)).collect();
+    let ratio = |f: f64, b: f64| ((f / b).ln() / 2.0).clamp(-1.0, 1.0) as f32;
+    if o.colour_tile == 0 {
+        let r: Vec<f32> = (0..nb).map(|b| ratio(pf[b], pb[b])).collect();
+        return bins
+            .par_iter()
+            .map(|bt| bt.iter().map(|b| r[*b as usize]).collect())
+            .collect();
+    }
+    let ts = o.colour_tile;
+    let (tx, ty) = (w.div_ceil(ts), h.div_ceil(ts));
+    let nt = tx * ty;
+    let tile = |i: usize| (i / w / ts) * tx + (i % w) / ts;
+    // Per frame and tile: foreground then background counts per bin.
+    let counts: Vec<Vec<u32>> = (0..n)
+        .into_par_iter()
+        .map(|t| {
+            let mut c = vec![0u32; nt * 2 * nb];
+            for (i, b) in bins[t].iter().enumerate() {
+                let side = usize::from(!fg_side(t, i));
+                c[(tile(i) * 2 + side) * nb + *b as usize] += 1;
+            }
+            c
+        })
+        .collect();
+    let k = o.colour_frames;
+    (0..n)
+        .into_par_iter()
+        .map(|t| {
+            let frames = t.saturating_sub(k)..(t + k + 1).min(n);
+            let mut win = vec![0u32; nt * 2 * nb];
+            for c in &counts[frames] {
+                for (s, v) in win.iter_mut().zip(c) {
+                    *s += v;
+                }
+            }
+            // Per tile: the ratio table of its 3 × 3 neighbourhood.
+            let mut table = vec![0f32; nt * nb];
+            let mut lf = vec![0f64; nb];
+            let mut lb = vec![0f64; nb];
+            for yt in 0..ty {
+                for xt in 0..tx {
+                    lf.fill(0.0);
+                    lb.fill(0.0);
+                    for yy in yt.saturating_sub(1)..(yt + 2).min(ty) {
+                        for xx in xt.saturating_sub(1)..(xt + 2).min(tx) {
+                            let base = (yy * tx + xx) * 2 * nb;
+                            for b in 0..nb {
+                                lf[b] += win[base + b] as f64;
+                                lb[b] += win[base + nb + b] as f64;
+                            }
+                        }
+                    }
+                    let (sf, sb): (f64, f64) = (lf.iter().sum(), lb.iter().sum());
+                    let row = &mut table[(yt * tx + xt) * nb..(yt * tx + xt + 1) * nb];
+                    for (b, r) in row.iter_mut().enumerate() {
+                        let f = (lf[b] + COLOUR_PRIOR * pf[b]) / (sf + COLOUR_PRIOR);
+                        let g = (lb[b] + COLOUR_PRIOR * pb[b]) / (sb + COLOUR_PRIOR);
+                        *r = ratio(f, g);
+                    }
+                }
+            }
+            bins[t]
+                .iter()
+                .enumerate()
+                .map(|(i, b)| table[tile(i) * nb + *b as usize])
+                .collect()
+        })
+        .collect()
+}
+
 /// Moving (true) / static per frame and grid pixel: the minimum cut of the
 /// space–time graph (module doc).
 pub fn graph_cut(e: &Evidence, o: &ObjectOptions) -> Vec<Vec<bool>> {
@@ -201,34 +322,12 @@ pub fn graph_cut(e: &Evidence, o: &ObjectOptions) -> Vec<Vec<bool>> {
     let np = w * h;
     let mut a = base_evidence(e, o);
     if o.colour_weight > 0.0 {
-        let nb = BINS * BINS * BINS;
-        let (mut fg, mut bg) = (vec![0f64; nb], vec![0f64; nb]);
-        for (t, at) in a.iter().enumerate() {
-            for (i, ai) in at.iter().enumerate() {
-                let b = colour_bin(&e.rgb[t], i);
-                if *ai > 0.0 {
-                    fg[b] += 1.0;
-                } else {
-                    bg[b] += 1.0;
-                }
+        let c = colour_evidence(e, &a, o);
+        a.par_iter_mut().zip(&c).for_each(|(at, ct)| {
+            for (ai, ci) in at.iter_mut().zip(ct) {
+                *ai += o.colour_weight * ci;
             }
-        }
-        let (nf, nbg): (f64, f64) = (fg.iter().sum(), bg.iter().sum());
-        if nf > 0.0 && nbg > 0.0 {
-            let alpha = 1.0;
-            let ratio: Vec<f32> = (0..nb)
-                .map(|b| {
-                    let pf = (fg[b] + alpha) / (nf + alpha * nb as f64);
-                    let pb = (bg[b] + alpha) / (nbg + alpha * nb as f64);
-                    ((pf / pb).ln() / 2.0).clamp(-1.0, 1.0) as f32
-                })
-                .collect();
-            a.par_iter_mut().enumerate().for_each(|(t, at)| {
-                for (i, ai) in at.iter_mut().enumerate() {
-                    *ai += o.colour_weight * ratio[colour_bin(&e.rgb[t], i)];
-                }
-            });
-        }
+        });
     }
     let mut g = Graph::new(n * np);
     g.reserve_edges(n * np * 3);

@@ -12,7 +12,7 @@ use crate::flow::{Flow, FlowEstimator};
 use crate::geometry::robust::{FitReport, ModelSelection};
 use crate::labels::{
     FrameLabels, LabelOptions, PairFit, Side, apply_three_view, cycle_valid, fit_pair,
-    frame_labels, propagate_u, three_view_residuals,
+    frame_labels, occlusion_violations, propagate_u, three_view_residuals,
 };
 use crate::mlp::{Label, Mlp, MlpOptions, TrainReport, train};
 use crate::objects::{Evidence, ObjectMethod, graph_cut};
@@ -713,6 +713,9 @@ fn label_round(
             {
                 apply_three_view(&mut fl, &e, &o.labels);
             }
+            if o.labels.occlusion {
+                apply_occlusion(&mut fl, pr, &fits, t, &o.labels);
+            }
             if o.labels.u_min_gradient > 0.0 {
                 for (u, t) in fl.u.iter_mut().zip(&pr.textured[t]) {
                     *u &= *t;
@@ -723,6 +726,65 @@ fn label_round(
         })
         .collect();
     (labels, fits)
+}
+
+/// The occlusion-order test (`LabelOptions::occlusion`) on frame `t`
+/// against each neighbour whose pair has a metric geometry: pixels that
+/// hide more parallax than their own by more than `occlusion_factor`·v
+/// (and `three_view_u_px`) become U and leave L.
+fn apply_occlusion(
+    fl: &mut FrameLabels,
+    pr: &Prepared,
+    fits: &[std::result::Result<PairFit, String>],
+    t: usize,
+    o: &LabelOptions,
+) {
+    let np = pr.fwd.len();
+    let mut viol: Option<Vec<f32>> = None;
+    let mut add = |v: Vec<f32>| match &mut viol {
+        Some(m) => m.iter_mut().zip(v).for_each(|(a, b)| *a = a.max(b)),
+        None => viol = Some(v),
+    };
+    if t < np
+        && let Ok(fit) = &fits[t]
+        && let Some(of) = &fit.oriented
+    {
+        add(occlusion_violations(
+            &pr.fwd[t],
+            &pr.valid_f[t],
+            &pr.bwd[t],
+            &pr.valid_b[t],
+            of,
+            false,
+        ));
+    }
+    if t > 0
+        && let Ok(fit) = &fits[t - 1]
+        && let Some(ob) = &fit.oriented
+    {
+        add(occlusion_violations(
+            &pr.bwd[t - 1],
+            &pr.valid_b[t - 1],
+            &pr.fwd[t - 1],
+            &pr.valid_f[t - 1],
+            ob,
+            true,
+        ));
+    }
+    let Some(viol) = viol else { return };
+    if viol.len() != fl.u.len() {
+        return;
+    }
+    let thr = (o.occlusion_factor * fl.v).max(o.three_view_u_px);
+    for (i, d) in viol.iter().enumerate() {
+        if *d > thr {
+            fl.u[i] = true;
+            fl.l[i] = false;
+        }
+    }
+    let m = fl.u.len().max(1) as f32;
+    fl.u_coverage = fl.u.iter().filter(|b| **b).count() as f32 / m;
+    fl.l_coverage = fl.l.iter().filter(|b| **b).count() as f32 / m;
 }
 
 /// Draw training samples: per kept frame up to `samples_per_frame`, half
