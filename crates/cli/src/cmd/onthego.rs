@@ -12,8 +12,8 @@
 //! `OUT/onthego.csv` and `OUT/report.md`. The user's folder is only read.
 
 use super::demo::link;
-use super::eval_views::{LpipsArgs, mean_std, score_views};
-use super::train::BackendKind;
+use super::eval_views::{Lpips, LpipsArgs, mean_std, score_views};
+use super::train::{BackendKind, TrainFlags, TrainJob};
 use super::train_common::train_and_eval;
 use crate::Ctx;
 use anyhow::{Context, Result, bail};
@@ -31,24 +31,37 @@ pub struct Args {
     pub out: PathBuf,
     /// Training steps per variant (the same for all).
     #[arg(long, default_value_t = 1000)]
-    pub steps: usize,
+    pub steps: u32,
     /// Integer image downscale for training and scoring.
     #[arg(long, default_value_t = 1)]
     pub downscale: u32,
     #[arg(long, value_enum, default_value_t = BackendKind::Auto)]
     pub backend: BackendKind,
-    /// Extra `romosplat train` options for every variant, e.g.
-    /// "--max-splats 20000" (one string, split on spaces).
-    #[arg(long, default_value = "")]
-    pub train_args: String,
+    /// Training flags of `romosplat train` for every variant, as one string
+    /// split on spaces, e.g. "--max-splats 20000 --strategy mcmc": the
+    /// algorithm's options and `--sparse-adam` (steps, downscale, backend
+    /// and masks are onthego's). Checked when the command line is parsed.
+    #[arg(long, default_value = "", allow_hyphen_values = true, value_parser = parse_train_args)]
+    pub train_args: TrainFlags,
     #[command(flatten)]
     pub lpips: LpipsArgs,
 }
 
-#[derive(Debug, clap::Parser)]
-struct TrainCli {
-    #[command(flatten)]
-    args: super::train::Args,
+/// `--train-args`: the string's words parsed once into typed training flags.
+fn parse_train_args(s: &str) -> Result<TrainFlags, String> {
+    #[derive(clap::Parser)]
+    #[command(no_binary_name = true)]
+    struct Words {
+        #[command(flatten)]
+        flags: TrainFlags,
+    }
+    <Words as clap::Parser>::try_parse_from(s.split_whitespace())
+        .map(|w| w.flags)
+        .map_err(|e| {
+            let msg = e.to_string();
+            let first = msg.lines().next().unwrap_or_default();
+            first.trim_start_matches("error: ").to_string()
+        })
 }
 
 /// One row of the table.
@@ -178,120 +191,33 @@ fn write_text(p: &Path, s: &str) -> Result<()> {
     Ok(())
 }
 
+/// One variant: its folder name, its table label, whether it trains with masks.
+struct Variant {
+    key: &'static str,
+    label: &'static str,
+    use_masks: bool,
+}
+
+/// What the RoMo mask stage did.
+struct MaskStage {
+    frames: usize,
+    minutes: f64,
+    /// Mean J against `gt_motion/`, when the scene has it.
+    j: Option<f64>,
+}
+
 pub fn run(args: &Args, ctx: &Ctx) -> Result<serde_json::Value> {
     let t_all = std::time::Instant::now();
-    let scene = Scene::load(&args.scene, &SceneOptions { downscale: 1 })
-        .with_context(|| format!("loading scene {}", args.scene.display()))?;
-    let (clutter, extra) = (scene.split_indices("clutter"), scene.split_indices("extra"));
-    if scene.split.is_none() || clutter.is_empty() || extra.is_empty() {
-        bail!(
-            "{}: the On-the-go protocol needs split.json with `clutter` (training) and `extra` (clean test) views",
-            args.scene.join("split.json").display()
-        );
-    }
-    if let Some(f) = scene.frames.iter().find(|f| f.pose.is_none()) {
-        bail!(
-            "{}: frame {} has no pose (transforms.json or sparse/0 must cover every view)",
-            args.scene.display(),
-            f.name
-        );
-    }
+    let (scene, clutter, extra) = load_scene(&args.scene)?;
     let mut net = args.lpips.load(ctx)?;
     let out = &args.out;
     std::fs::create_dir_all(out).with_context(|| format!("creating {}", out.display()))?;
-    let vdir = |v: &str| out.join("variants").join(v);
-
-    // The variants and their scene folders.
-    let mut variants: Vec<(&str, &str, Vec<String>)> = Vec::new();
-    variant_dir(&scene, &vdir("none"), None, None)?;
-    variants.push(("none", "(a) no masks", vec!["--no-masks".into()]));
-
-    ctx.info(format!(
-        "RoMo masks on {} clutter frames ({} held out)",
-        clutter.len(),
-        extra.len()
-    ));
-    let t_mask = std::time::Instant::now();
-    let romo_opts = romo::RomoOptions {
-        out: Some(out.join("romo")),
-        ..Default::default()
-    };
-    let pb = ctx.progress(clutter.len() as u64, "mask");
-    let romo_rep = romo::segment_scene(&scene, &romo_opts, &|stage, done, total| {
-        pb.set_message(stage.to_string());
-        pb.set_length(total as u64);
-        pb.set_position(done as u64);
-    })?;
-    pb.finish_and_clear();
-    let mask_minutes = t_mask.elapsed().as_secs_f64() / 60.0;
-    variant_dir(&scene, &vdir("romo"), None, Some(&out.join("romo/masks")))?;
-    variants.push(("romo", "(b) RoMo masks", vec![]));
-
-    let mut mask_j = None;
-    if scene.frames.iter().any(|f| f.gt_motion_path.is_some()) {
-        let n = gt_masks(&scene, &out.join("gt/masks"))?;
-        ctx.info(format!("ground-truth masks for {n} frames"));
-        variant_dir(&scene, &vdir("gt"), None, Some(&out.join("gt/masks")))?;
-        variants.push(("gt", "(c) ground-truth masks", vec![]));
-        mask_j = Some(romo::scene::evaluate_scene_masks(&scene, &out.join("romo/masks"))?.j_mean);
-    }
-    let clean_root = scene.root.join("clean");
-    if clean_root.is_dir() {
-        variant_dir(&scene, &vdir("oracle"), Some(&clean_root), None)?;
-        variants.push(("oracle", "(d) clean oracle", vec!["--no-masks".into()]));
-    }
-
-    let extra_train: Vec<String> = args
-        .train_args
-        .split_whitespace()
-        .map(String::from)
-        .collect();
+    let (variants, masks) = prepare_variants(&scene, out, ctx)?;
     let mut rows = Vec::new();
-    for (key, label, mut targs) in variants {
-        targs.extend(["--downscale".into(), args.downscale.to_string()]);
-        targs.extend(extra_train.iter().cloned());
-        ctx.info(format!("training {label}: {} steps", args.steps));
-        let run_dir = out.join("runs").join(key);
-        let t0 = std::time::Instant::now();
-        let mut argv: Vec<String> = vec![
-            "train".into(),
-            "--scene".into(),
-            vdir(key).display().to_string(),
-            "--out".into(),
-            run_dir.display().to_string(),
-            "--steps".into(),
-            args.steps.to_string(),
-        ];
-        argv.extend(targs);
-        let mut job = <TrainCli as clap::Parser>::try_parse_from(&argv)
-            .context("train options (--train-args)")?
-            .args
-            .job();
-        job.backend = args.backend;
-        let res = train_and_eval(ctx, &job)?;
-        let minutes = t0.elapsed().as_secs_f64() / 60.0;
-        // Score every variant against the user's scene (the clean `extra`
-        // views), so all rows see the same references.
-        let views = super::render::ViewArgs {
-            splats: run_dir.join("splats.ply"),
-            scene: args.scene.clone(),
-            split: "extra".into(),
-            poses: None,
-            downscale: args.downscale,
-            backend: args.backend,
-        };
-        let s = score_views(&views, false, net.as_mut(), ctx)?;
-        let psnr: Vec<f64> = s.report.views.iter().map(|v| v.psnr).collect();
-        rows.push(Row {
-            variant: label.into(),
-            psnr: s.report.mean_psnr,
-            ssim: s.report.mean_ssim,
-            lpips: s.lpips.as_deref().map(|l| mean_std(l).0),
-            psnr_std: mean_std(&psnr).1,
-            splats: res.splats,
-            minutes,
-            mask_minutes: (key == "romo").then_some(mask_minutes),
-        });
+    for v in &variants {
+        let mut row = train_variant(args, v, net.as_mut(), ctx)?;
+        row.mask_minutes = (v.key == "romo").then_some(masks.minutes);
+        rows.push(row);
     }
 
     let table = markdown(&rows);
@@ -314,7 +240,7 @@ pub fn run(args: &Args, ctx: &Ctx) -> Result<serde_json::Value> {
         "test_views": extra.len(),
         "steps": args.steps,
         "downscale": args.downscale,
-        "romo_masks": {"frames": romo_rep.frames.len(), "mean_j": mask_j, "minutes": mask_minutes},
+        "romo_masks": {"frames": masks.frames, "mean_j": masks.j, "minutes": masks.minutes},
         "lpips_weights": net.as_ref().map(|n| n.path().to_path_buf()),
         "rows": rows,
         "total_minutes": t_all.elapsed().as_secs_f64() / 60.0,
@@ -333,18 +259,164 @@ pub fn run(args: &Args, ctx: &Ctx) -> Result<serde_json::Value> {
         extra.len(),
         args.steps,
         args.downscale,
-        mask_minutes,
-        mask_j.map_or(String::new(), |j| format!(", J {j:.3} against gt_motion/"))
+        masks.minutes,
+        masks
+            .j
+            .map_or(String::new(), |j| format!(", J {j:.3} against gt_motion/"))
     );
     write_text(&out.join("report.md"), &md)?;
     ctx.info(format!("wrote {}", out.join("report.md").display()));
     Ok(json)
 }
 
+/// The user's scene with its clutter and extra (clean held-out) views; every
+/// frame must have a pose.
+fn load_scene(root: &Path) -> Result<(Scene, Vec<usize>, Vec<usize>)> {
+    let scene = Scene::load(root, &SceneOptions { downscale: 1 })
+        .with_context(|| format!("loading scene {}", root.display()))?;
+    let (clutter, extra) = (scene.split_indices("clutter"), scene.split_indices("extra"));
+    if scene.split.is_none() || clutter.is_empty() || extra.is_empty() {
+        bail!(
+            "{}: the On-the-go protocol needs split.json with `clutter` (training) and `extra` (clean test) views",
+            root.join("split.json").display()
+        );
+    }
+    if let Some(f) = scene.frames.iter().find(|f| f.pose.is_none()) {
+        bail!(
+            "{}: frame {} has no pose (transforms.json or sparse/0 must cover every view)",
+            root.display(),
+            f.name
+        );
+    }
+    Ok((scene, clutter, extra))
+}
+
+/// The variants' scene folders under `out/variants`: (a) always, (b) after
+/// RoMo's masks, (c) when the scene has `gt_motion/`, (d) when it has `clean/`.
+fn prepare_variants(scene: &Scene, out: &Path, ctx: &Ctx) -> Result<(Vec<Variant>, MaskStage)> {
+    let vdir = |v: &str| out.join("variants").join(v);
+    let mut variants = Vec::new();
+    let mut add = |key, label, use_masks| {
+        variants.push(Variant {
+            key,
+            label,
+            use_masks,
+        })
+    };
+    variant_dir(scene, &vdir("none"), None, None)?;
+    add("none", "(a) no masks", false);
+
+    let clutter = scene.split_indices("clutter");
+    ctx.info(format!(
+        "RoMo masks on {} clutter frames ({} held out)",
+        clutter.len(),
+        scene.split_indices("extra").len()
+    ));
+    let t_mask = std::time::Instant::now();
+    let romo_opts = romo::RomoOptions {
+        out: Some(out.join("romo")),
+        ..Default::default()
+    };
+    let pb = ctx.progress(clutter.len() as u64, "mask");
+    let romo_rep = romo::segment_scene(scene, &romo_opts, &|stage, done, total| {
+        pb.set_message(stage.to_string());
+        pb.set_length(total as u64);
+        pb.set_position(done as u64);
+    })?;
+    pb.finish_and_clear();
+    let mut masks = MaskStage {
+        frames: romo_rep.frames.len(),
+        minutes: t_mask.elapsed().as_secs_f64() / 60.0,
+        j: None,
+    };
+    variant_dir(scene, &vdir("romo"), None, Some(&out.join("romo/masks")))?;
+    add("romo", "(b) RoMo masks", true);
+
+    if scene.frames.iter().any(|f| f.gt_motion_path.is_some()) {
+        let n = gt_masks(scene, &out.join("gt/masks"))?;
+        ctx.info(format!("ground-truth masks for {n} frames"));
+        variant_dir(scene, &vdir("gt"), None, Some(&out.join("gt/masks")))?;
+        add("gt", "(c) ground-truth masks", true);
+        masks.j = Some(romo::scene::evaluate_scene_masks(scene, &out.join("romo/masks"))?.j_mean);
+    }
+    let clean_root = scene.root.join("clean");
+    if clean_root.is_dir() {
+        variant_dir(scene, &vdir("oracle"), Some(&clean_root), None)?;
+        add("oracle", "(d) clean oracle", false);
+    }
+    Ok((variants, masks))
+}
+
+/// Train one variant into `out/runs/KEY` and score it on the user's scene
+/// (the clean `extra` views), so all rows see the same references.
+fn train_variant(args: &Args, v: &Variant, net: Option<&mut Lpips>, ctx: &Ctx) -> Result<Row> {
+    ctx.info(format!("training {}: {} steps", v.label, args.steps));
+    let run_dir = args.out.join("runs").join(v.key);
+    let t0 = std::time::Instant::now();
+    let job = TrainJob {
+        scene: args.out.join("variants").join(v.key),
+        poses: None,
+        downscale: args.downscale,
+        holdout_every: 0,
+        backend: args.backend,
+        sparse_adam: args.train_args.sparse_adam,
+        resume: None,
+        out: run_dir.clone(),
+        test_renders: None,
+        opts: args.train_args.train_options(args.steps, v.use_masks),
+    };
+    let res = train_and_eval(ctx, &job)?;
+    let minutes = t0.elapsed().as_secs_f64() / 60.0;
+    let views = super::render::ViewArgs {
+        splats: run_dir.join("splats.ply"),
+        scene: args.scene.clone(),
+        split: "extra".into(),
+        poses: None,
+        downscale: args.downscale,
+        backend: args.backend,
+    };
+    let s = score_views(&views, false, net, ctx)?;
+    let psnr: Vec<f64> = s.report.views.iter().map(|v| v.psnr).collect();
+    Ok(Row {
+        variant: v.label.into(),
+        psnr: s.report.mean_psnr,
+        ssim: s.report.mean_ssim,
+        lpips: s.lpips.as_deref().map(|l| mean_std(l).0),
+        psnr_std: mean_std(&psnr).1,
+        splats: res.splats,
+        minutes,
+        mask_minutes: None,
+    })
+}
+
 #[cfg(test)]
 mod tests {
     #![allow(clippy::unwrap_used, clippy::expect_used)]
     use super::*;
+
+    #[test]
+    fn train_args_parse_once_into_typed_flags() {
+        let f = parse_train_args("--max-splats 20000  --strategy mcmc --sparse-adam").unwrap();
+        let o = f.train_options(200, true);
+        assert_eq!(o.strategy.max_splats, 20_000);
+        assert_eq!(o.mcmc.cap_max, 20_000);
+        assert_eq!(o.strategy_kind, splat::strategy::StrategyKind::Mcmc);
+        assert_eq!((o.steps, o.use_masks, f.sparse_adam), (200, true, true));
+        let none = parse_train_args("").unwrap();
+        assert_eq!(
+            none.train_options(1000, false),
+            splat::train::TrainOptions {
+                steps: 1000,
+                use_masks: false,
+                ..Default::default()
+            }
+        );
+        // Flags that are onthego's own, and unknown ones, are refused by name.
+        for (bad, named) in [("--steps 5", "--steps"), ("--max-splats x", "--max-splats")] {
+            let e = parse_train_args(bad).unwrap_err();
+            assert!(e.contains(named) && !e.contains('\n'), "{e}");
+        }
+    }
 
     #[test]
     fn table_shapes() {

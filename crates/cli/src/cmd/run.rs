@@ -10,7 +10,7 @@
 
 use super::demo::{link, print_table};
 use super::export::{ExportJob, ExportOutcome};
-use super::train::{BackendKind, TrainJob, TrainOutcome};
+use super::train::{BackendKind, TrainJob, TrainOutcome, scores_line};
 use super::train_common::short_schedule;
 use crate::Ctx;
 use crate::keyframes::{KeyframeOptions, link_keyframes, select_keyframes};
@@ -893,49 +893,32 @@ fn print_summary(ctx: &Ctx, plan: &Plan, rows: &[StageRow], results: &Results, t
     if !rows.iter().any(|r| r.ran) {
         ctx.info("nothing to do: every stage is up to date");
     }
-    if let Some(t) = results.train.as_ref().and_then(|t| t.test.as_ref()) {
-        ctx.info(format!(
-            "held-out views: PSNR {:.2} dB, SSIM {:.4}{} ({} views)",
-            t.mean_psnr,
-            t.mean_ssim,
-            results
-                .train
-                .as_ref()
-                .and_then(|r| r.test_lpips)
-                .map_or(String::new(), |l| format!(", LPIPS {l:.4}")),
-            t.views.len()
-        ));
-        for (name, o) in [("masks", &results.train), ("no masks", &results.baseline)] {
-            if let Some(st) = o.as_ref().and_then(|o| o.test_static.as_ref()) {
-                ctx.info(format!(
-                    "  static pixels, {name}: PSNR {:.2} dB, SSIM {:.4}{}",
-                    st.mean_psnr,
-                    st.mean_ssim,
-                    st.lpips
-                        .map_or(String::new(), |l| format!(", LPIPS {l:.4}"))
-                ));
-            }
-        }
-        if let Some(b) = results.baseline.as_ref().and_then(|b| b.test.as_ref()) {
+    let Some(train) = &results.train else { return };
+    let Some(t) = &train.test else { return };
+    ctx.info(format!(
+        "held-out views: {} ({} views)",
+        scores_line(t.mean_psnr, t.mean_ssim, train.test_lpips),
+        t.views.len()
+    ));
+    for (name, o) in [("masks", &results.train), ("no masks", &results.baseline)] {
+        if let Some(st) = o.as_ref().and_then(|o| o.test_static.as_ref()) {
             ctx.info(format!(
-                "  all pixels, no masks (baseline): PSNR {:.2} dB, SSIM {:.4}{}",
-                b.mean_psnr,
-                b.mean_ssim,
-                results
-                    .baseline
-                    .as_ref()
-                    .and_then(|r| r.test_lpips)
-                    .map_or(String::new(), |l| format!(", LPIPS {l:.4}"))
+                "  static pixels, {name}: {}",
+                scores_line(st.mean_psnr, st.mean_ssim, st.lpips)
             ));
         }
-        if results
-            .train
-            .as_ref()
-            .is_some_and(|r| r.test_lpips.is_none())
-        {
-            ctx.info(splat::lpips_alex::missing_weights_hint(
-                splat::lpips_alex::default_weights_path().as_deref(),
-            ));
-        }
+    }
+    if let Some(b) = &results.baseline
+        && let Some(bt) = &b.test
+    {
+        ctx.info(format!(
+            "  all pixels, no masks (baseline): {}",
+            scores_line(bt.mean_psnr, bt.mean_ssim, b.test_lpips)
+        ));
+    }
+    if train.test_lpips.is_none() {
+        ctx.info(splat::lpips_alex::missing_weights_hint(
+            splat::lpips_alex::default_weights_path().as_deref(),
+        ));
     }
 }

@@ -4,7 +4,6 @@
 
 use super::run::{Plan, Results, Source};
 use super::train::TrainOutcome;
-use super::train_common::VariantResult;
 use crate::report::{self, Chart, Figure, Report, Series, Table};
 use anyhow::{Context, Result};
 
@@ -170,31 +169,29 @@ fn held_out(
             })
             .collect(),
     });
-    let models: Vec<(&str, VariantResult)> = outcomes
-        .iter()
-        .map(|(n, o)| (*n, VariantResult::new((*o).clone(), 0.0)))
-        .collect();
     for (title, y, curve) in [
-        ("training loss", "loss", (|v| v.loss_curve.clone()) as Curve),
-        ("training PSNR", "dB", |v| v.psnr_curve.clone()),
+        ("training loss", "loss", TrainOutcome::loss_curve as Curve),
+        ("training PSNR", "dB", TrainOutcome::psnr_curve),
     ] {
         rep.charts.push(Chart {
             title: title.into(),
             x_label: "step".into(),
             y_label: y.into(),
-            series: models
+            series: outcomes
                 .iter()
-                .map(|(name, v)| Series {
+                .map(|(name, o)| Series {
                     name: (*name).into(),
-                    points: curve(v),
+                    points: curve(o),
                 })
                 .collect(),
         });
     }
-    for i in 0..models[0].1.renders.len().min(4) {
+    for i in 0..t.test_renders.len().min(4) {
         let mut row = Vec::new();
-        for (name, v) in &models {
-            let Some(p) = v.renders.get(i) else { continue };
+        for (name, o) in &outcomes {
+            let Some(p) = o.test_renders.get(i) else {
+                continue;
+            };
             let img = image::open(p)
                 .with_context(|| format!("{}: cannot read", p.display()))?
                 .to_rgb8();
@@ -208,7 +205,7 @@ fn held_out(
     Ok(())
 }
 
-type Curve = fn(&VariantResult) -> Vec<(f64, f64)>;
+type Curve = fn(&TrainOutcome) -> Vec<(f64, f64)>;
 
 /// The training image size: the first frame's, downscaled.
 fn train_resolution(plan: &Plan) -> Option<(u32, u32)> {

@@ -8,11 +8,11 @@ use crate::Ctx;
 use anyhow::{Context, bail};
 use loader::{Scene, SceneOptions};
 use splat::backend::TrainBackend;
-use splat::io::{read_checkpoint, write_ply};
+use splat::io::{Checkpoint, read_checkpoint, write_ply};
 use splat::reference::CpuBackend;
-use splat::train::data::{InitReport, initial_splats, load_views, scene_extent};
-use splat::train::eval::{EvalReport, evaluate};
-use splat::train::{InitMode, TrainData, TrainOptions, TrainReport, Trainer, fresh_start};
+use splat::train::data::{InitReport, View, initial_splats, load_views, scene_extent};
+use splat::train::eval::{EvalReport, evaluate, score_images};
+use splat::train::{TrainData, TrainOptions, TrainReport, Trainer, fresh_start};
 use splat::types::RenderOptions;
 use std::path::{Path, PathBuf};
 
@@ -95,60 +95,8 @@ pub struct Args {
     /// Hold out every Nth frame for testing when the scene has no split.json (0 = none).
     #[arg(long, default_value_t = 0)]
     pub holdout_every: usize,
-    /// D-SSIM weight λ (INRIA: 0.2; 0 disables SSIM).
-    #[arg(long, default_value_t = TrainOptions::default().ssim_weight)]
-    pub ssim_weight: f32,
-    /// Highest SH degree (0..=3).
-    #[arg(long, default_value_t = TrainOptions::default().sh_degree)]
-    pub sh_degree: u32,
-    /// Cap on the number of splats (MCMC: its cap is min(1 000 000, this)).
-    #[arg(long, default_value_t = splat::strategy::DefaultStrategyOptions::default().max_splats)]
-    pub max_splats: usize,
-    /// Densification strategy.
-    #[arg(long, value_enum, default_value_t = splat::strategy::StrategyKind::Default)]
-    pub strategy: splat::strategy::StrategyKind,
-    /// Default strategy: first step that densifies (INRIA 500).
-    #[arg(long, default_value_t = splat::strategy::DefaultStrategyOptions::default().densify_from)]
-    pub densify_from: u32,
-    /// Default strategy: last step that densifies (INRIA 15000).
-    #[arg(long, default_value_t = splat::strategy::DefaultStrategyOptions::default().densify_until)]
-    pub densify_until: u32,
-    /// Default strategy: densify every N steps (INRIA 100).
-    #[arg(long, default_value_t = splat::strategy::DefaultStrategyOptions::default().densify_every)]
-    pub densify_every: u32,
-    /// Default strategy: view-space positional gradient threshold (INRIA 2e-4).
-    #[arg(long, default_value_t = splat::strategy::DefaultStrategyOptions::default().grad_threshold)]
-    pub grad_threshold: f32,
-    /// Default strategy: reset opacities every N steps (INRIA 3000; 0 = never).
-    #[arg(long, default_value_t = splat::strategy::DefaultStrategyOptions::default().opacity_reset_every)]
-    pub opacity_reset_every: u32,
-    /// Default strategy: after the first opacity reset, prune splats wider
-    /// than this many pixels on screen (INRIA 20; 0 = off, the default, as
-    /// gsplat: at low resolution the 20 px rule removes the large splats
-    /// that carry the background).
-    #[arg(long, default_value_t = splat::strategy::DefaultStrategyOptions::default().prune_screen_px)]
-    pub prune_screen_px: f32,
-    /// Sparse Adam on the GPU (gsplat's SelectiveAdam, Brush): splats not
-    /// visible in a step's view keep their parameters and moments instead
-    /// of decaying the moments and moving by momentum as torch's dense Adam
-    /// does (INRIA). Off by default; wgpu only.
-    #[arg(long)]
-    pub sparse_adam: bool,
-    /// Raise the active SH degree by one every N steps (INRIA 1000).
-    #[arg(long, default_value_t = TrainOptions::default().sh_degree_every)]
-    pub sh_degree_every: u32,
-    /// Initialisation source.
-    #[arg(long, value_enum, default_value_t = InitMode::Auto)]
-    pub init: InitMode,
-    /// Random background each step.
-    #[arg(long)]
-    pub random_background: bool,
-    /// Antialiased (Mip-Splatting) rendering.
-    #[arg(long)]
-    pub antialiased: bool,
-    /// Write a checkpoint every N steps (0 = only at the end).
-    #[arg(long, default_value_t = 0)]
-    pub checkpoint_every: u32,
+    #[command(flatten)]
+    pub flags: TrainFlags,
     /// Stop after this many minutes of training (0 = no limit); the summary
     /// reports the steps actually done.
     #[arg(long, default_value_t = 0.0)]
@@ -156,12 +104,38 @@ pub struct Args {
     /// Resume from this checkpoint.bin.
     #[arg(long)]
     pub resume: Option<PathBuf>,
-    /// Random seed.
-    #[arg(long, default_value_t = TrainOptions::default().seed)]
-    pub seed: u64,
     /// Output folder.
     #[arg(long)]
     pub out: PathBuf,
+}
+
+/// The training flags `train` shares with `onthego --train-args`: the
+/// algorithm's options (`splat::train::TrainOptions`, whose `Default` gives
+/// every flag's default) and sparse Adam.
+#[derive(Debug, Clone, clap::Args)]
+pub struct TrainFlags {
+    #[command(flatten)]
+    pub opts: TrainOptions,
+    /// Sparse Adam on the GPU (gsplat's SelectiveAdam, Brush): splats not
+    /// visible in a step's view keep their parameters and moments instead
+    /// of decaying the moments and moving by momentum as torch's dense Adam
+    /// does (INRIA). Off by default; wgpu only.
+    #[arg(long)]
+    pub sparse_adam: bool,
+}
+
+impl TrainFlags {
+    /// The options of a `steps`-long run, with or without masks: `--max-splats`
+    /// caps both strategies.
+    pub fn train_options(&self, steps: u32, use_masks: bool) -> TrainOptions {
+        let mut o = TrainOptions {
+            steps,
+            use_masks,
+            ..self.opts.clone()
+        };
+        o.cap_mcmc_at_max_splats();
+        o
+    }
 }
 
 /// Replace frame poses (and the model used for init) with a COLMAP model's.
@@ -255,31 +229,35 @@ pub struct StaticScores {
     pub lpips: Option<f64>,
 }
 
-/// [`StaticScores`] of `splats` on held-out frames `idx`; `None` when none
-/// of them has a mask.
+/// "PSNR 25.52 dB, SSIM 0.8690, LPIPS 0.0790" (LPIPS when it was scored):
+/// how held-out scores are printed.
+pub fn scores_line(psnr: f64, ssim: f64, lpips: Option<f64>) -> String {
+    format!(
+        "PSNR {psnr:.2} dB, SSIM {ssim:.4}{}",
+        lpips.map_or(String::new(), |l| format!(", LPIPS {l:.4}"))
+    )
+}
+
+/// [`StaticScores`] of the held-out `images` (rendered for the all-pixel
+/// scores) against `views` with their masks; `None` when no view has a mask.
 fn score_static_pixels(
-    backend: &mut dyn TrainBackend,
-    splats: &splat::Splats,
-    scene: &Scene,
-    idx: &[usize],
-    ropts: &RenderOptions,
+    views: &[View],
+    images: &[Vec<f32>],
+    lpips: Option<&mut super::eval_views::Lpips>,
     ctx: &Ctx,
 ) -> anyhow::Result<Option<StaticScores>> {
-    let views = load_views(scene, idx, true)?;
     let masked_views = views.iter().filter(|v| v.mask.is_some()).count();
     if masked_views == 0 {
         return Ok(None);
     }
-    let (ev, images) = evaluate(backend, splats, &views, ropts)?;
-    let lpips = match super::eval_views::builtin_lpips()? {
-        Some(mut net) => Some(super::eval_views::mean_std(&net.score_views(&views, &images)?).0),
+    let ev = score_images(views, images);
+    let lpips = match lpips {
+        Some(net) => Some(super::eval_views::mean_std(&net.score_views(views, images)?).0),
         None => None,
     };
     ctx.info(format!(
-        "test views, static pixels ({masked_views} with masks): PSNR {:.2} dB, SSIM {:.4}{}",
-        ev.mean_psnr,
-        ev.mean_ssim,
-        lpips.map_or(String::new(), |l| format!(", LPIPS {l:.4}"))
+        "test views, static pixels ({masked_views} with masks): {}",
+        scores_line(ev.mean_psnr, ev.mean_ssim, lpips)
     ));
     Ok(Some(StaticScores {
         masked_views,
@@ -329,36 +307,8 @@ impl Args {
     /// The training options these flags select.
     pub fn train_options(&self) -> TrainOptions {
         TrainOptions {
-            steps: self.steps,
-            ssim_weight: self.ssim_weight,
-            sh_degree: self.sh_degree,
-            random_background: self.random_background,
-            antialiased: self.antialiased,
-            use_masks: !self.no_masks,
-            checkpoint_every: self.checkpoint_every,
             time_limit_s: self.max_minutes * 60.0,
-            seed: self.seed,
-            init: self.init,
-            sh_degree_every: self.sh_degree_every,
-            strategy: splat::strategy::DefaultStrategyOptions {
-                max_splats: self.max_splats,
-                densify_from: self.densify_from,
-                densify_until: self.densify_until,
-                densify_every: self.densify_every,
-                grad_threshold: self.grad_threshold,
-                opacity_reset_every: self.opacity_reset_every,
-                prune_screen_px: self.prune_screen_px,
-                ..Default::default()
-            },
-            strategy_kind: self.strategy,
-            mcmc: {
-                let d = splat::strategy::McmcStrategyOptions::default();
-                splat::strategy::McmcStrategyOptions {
-                    cap_max: d.cap_max.min(self.max_splats),
-                    ..d
-                }
-            },
-            ..Default::default()
+            ..self.flags.train_options(self.steps, !self.no_masks)
         }
     }
 
@@ -370,12 +320,30 @@ impl Args {
             downscale: self.downscale,
             holdout_every: self.holdout_every,
             backend: self.backend,
-            sparse_adam: self.sparse_adam,
+            sparse_adam: self.flags.sparse_adam,
             resume: self.resume.clone(),
             out: self.out.clone(),
             test_renders: None,
             opts: self.train_options(),
         }
+    }
+}
+
+impl TrainOutcome {
+    /// (step, loss) samples of the training curve.
+    pub fn loss_curve(&self) -> Vec<(f64, f64)> {
+        self.history
+            .iter()
+            .map(|h| (h.step as f64, h.loss as f64))
+            .collect()
+    }
+
+    /// (step, training PSNR) samples of the training curve.
+    pub fn psnr_curve(&self) -> Vec<(f64, f64)> {
+        self.history
+            .iter()
+            .map(|h| (h.step as f64, h.psnr as f64))
+            .collect()
     }
 }
 
@@ -387,6 +355,73 @@ pub fn run(args: &Args, ctx: &Ctx) -> anyhow::Result<serde_json::Value> {
 /// Train a scene: load, initialise, train, write `splats.ply` and
 /// `summary.json`, score (and optionally render) the held-out views.
 pub fn train(job: &TrainJob, ctx: &Ctx) -> anyhow::Result<TrainOutcome> {
+    let (run, start) = prepare(job, ctx)?;
+    // Outputs (checkpoints, splats.ply, summary.json) are staged and moved
+    // into --out together at the end: a failed run leaves --out untouched.
+    let stage = loader::io::Staging::new(&job.out)?;
+    // Errors name the output folder, not the hidden staging folder.
+    let staged = (|| -> anyhow::Result<TrainOutcome> {
+        let mut backend = make_train_backend(job.backend, job.sparse_adam, ctx)?;
+        let (end, report, history) = run_trainer(backend.as_mut(), &run, start, stage.path(), ctx)?;
+        let ply = job.out.join("splats.ply");
+        write_ply(stage.path().join("splats.ply"), &end.splats)?;
+        ctx.info(format!(
+            "trained {} steps in {:.1} s ({:.2} steps/s), {} splats, train PSNR {:.2} → {}",
+            report.steps - report.start_step,
+            report.seconds,
+            report.steps_per_sec,
+            report.splats,
+            report.final_train_psnr,
+            ply.display()
+        ));
+        let held_out = if run.test_idx.is_empty() {
+            HeldOut::default()
+        } else {
+            score_held_out(backend.as_mut(), &end.splats, &run, job, ctx)?
+        };
+        let outcome = TrainOutcome {
+            splats_ply: ply,
+            checkpoint: job.out.join("checkpoint.bin"),
+            backend: report.backend.clone(),
+            train_views: run.train_idx.len(),
+            masked_views: run.masked,
+            extent: run.data.extent,
+            init: run.init,
+            report,
+            test: held_out.test,
+            test_renders: held_out.renders,
+            test_lpips: held_out.lpips,
+            test_static: held_out.static_scores,
+            history,
+            options: run.opts,
+        };
+        loader::io::write_bytes_atomic(
+            stage.path().join("summary.json"),
+            serde_json::to_string_pretty(&outcome)?.as_bytes(),
+        )?;
+        Ok(outcome)
+    })();
+    let outcome = staged.map_err(|e| anyhow::anyhow!(stage.public(&format!("{e:#}"))))?;
+    stage.commit()?;
+    Ok(outcome)
+}
+
+/// A loaded training run: the scene, its split and the training views.
+struct Prepared {
+    scene: Scene,
+    opts: TrainOptions,
+    train_idx: Vec<usize>,
+    test_idx: Vec<usize>,
+    data: TrainData,
+    /// Training views with a mask.
+    masked: usize,
+    init: Option<InitReport>,
+}
+
+/// Load the scene (with `--poses` applied), split it, load the training
+/// views and initialise the splats (or read the checkpoint to resume): the
+/// run and its starting point.
+fn prepare(job: &TrainJob, ctx: &Ctx) -> anyhow::Result<(Prepared, Checkpoint)> {
     let mut scene = Scene::load(
         &job.scene,
         &SceneOptions {
@@ -411,7 +446,6 @@ pub fn train(job: &TrainJob, ctx: &Ctx) -> anyhow::Result<TrainOutcome> {
     let masked = views.iter().filter(|v| v.mask.is_some()).count();
     let cams: Vec<_> = views.iter().map(|v| v.camera).collect();
     let extent = scene_extent(&cams);
-    let data = TrainData { views, extent };
     let (start, init) = match &job.resume {
         Some(p) => (read_checkpoint(p)?, None),
         None => {
@@ -423,121 +457,222 @@ pub fn train(job: &TrainJob, ctx: &Ctx) -> anyhow::Result<TrainOutcome> {
             (fresh_start(s), Some(rep))
         }
     };
-    // Outputs (checkpoints, splats.ply, summary.json) are staged and moved
-    // into --out together at the end: a failed run leaves --out untouched.
-    let stage = loader::io::Staging::new(&job.out)?;
-    // Errors name the output folder, not the hidden staging folder.
-    let staged = (|| -> anyhow::Result<TrainOutcome> {
-        let mut backend = make_train_backend(job.backend, job.sparse_adam, ctx)?;
-        let pb = ctx.progress(opts.steps as u64, "train");
-        pb.set_position(start.step as u64);
-        pb.reset_rate();
-        let mut trainer = Trainer {
-            backend: backend.as_mut(),
-            data: &data,
-            opts: opts.clone(),
-            checkpoint_dir: Some(stage.path().to_path_buf()),
-        };
-        let every = (opts.steps / 100).max(1);
-        let mut history: Vec<HistoryPoint> = Vec::new();
-        let (end, rep) = trainer.run(start, &mut |p| {
-            if p.step.is_multiple_of(every) || p.step == p.steps {
-                history.push(HistoryPoint {
-                    step: p.step,
-                    loss: p.loss,
-                    psnr: p.psnr,
-                    splats: p.splats,
-                });
-            }
-            pb.set_position(p.step as u64);
-            if p.step.is_multiple_of(10) || p.step == p.steps {
-                pb.set_message(format!(
-                    "loss {:.4} psnr {:.2} splats {}",
-                    p.loss, p.psnr, p.splats
-                ));
-            }
-        })?;
-        pb.finish_and_clear();
-        let ply = job.out.join("splats.ply");
-        write_ply(stage.path().join("splats.ply"), &end.splats)?;
-        ctx.info(format!(
-            "trained {} steps in {:.1} s ({:.2} steps/s), {} splats, train PSNR {:.2} → {}",
-            rep.steps - rep.start_step,
-            rep.seconds,
-            rep.steps_per_sec,
-            rep.splats,
-            rep.final_train_psnr,
-            ply.display()
-        ));
-        let mut test = None;
-        let mut test_renders = Vec::new();
-        let mut test_lpips = None;
-        let mut test_static = None;
-        if !test_idx.is_empty() {
-            let tviews = load_views(&scene, &test_idx, false)?;
-            let ropts = RenderOptions {
-                background: opts.background,
-                sh_degree: end.splats.sh_degree,
-                low_pass: opts.low_pass,
-                antialiased: opts.antialiased,
-            };
-            let (ev, images) = evaluate(backend.as_mut(), &end.splats, &tviews, &ropts)?;
-            ctx.info(format!(
-                "test views: PSNR {:.2} dB, SSIM {:.4} ({} views)",
-                ev.mean_psnr,
-                ev.mean_ssim,
-                ev.views.len()
-            ));
-            if let Some(mut net) = super::eval_views::builtin_lpips()? {
-                let l = net.score_views(&tviews, &images)?;
-                let mean = super::eval_views::mean_std(&l).0;
-                ctx.info(format!("test views: LPIPS {mean:.4}"));
-                test_lpips = Some(mean);
-            }
-            if let Some(dir) = &job.test_renders {
-                std::fs::create_dir_all(dir)
-                    .with_context(|| format!("creating {}", dir.display()))?;
-                for (v, img) in tviews.iter().zip(images) {
-                    let path = dir.join(format!("{}.png", super::render::stem(&v.name)));
-                    let img = image::Rgb32FImage::from_raw(v.camera.width, v.camera.height, img)
-                        .ok_or_else(|| anyhow::anyhow!("{}: render size mismatch", v.name))?;
-                    loader::io::write_png_rgb32f(&path, &img)?;
-                    test_renders.push(path);
-                }
-            }
-            test_static = score_static_pixels(
-                backend.as_mut(),
-                &end.splats,
-                &scene,
-                &test_idx,
-                &ropts,
-                ctx,
-            )?;
-            test = Some(ev);
+    let run = Prepared {
+        scene,
+        opts,
+        train_idx,
+        test_idx,
+        data: TrainData { views, extent },
+        masked,
+        init,
+    };
+    Ok((run, start))
+}
+
+/// Run the trainer with a progress bar (checkpoints into `checkpoint_dir`);
+/// returns the end state, the report and about 100 curve samples.
+fn run_trainer(
+    backend: &mut dyn TrainBackend,
+    run: &Prepared,
+    start: Checkpoint,
+    checkpoint_dir: &Path,
+    ctx: &Ctx,
+) -> anyhow::Result<(Checkpoint, TrainReport, Vec<HistoryPoint>)> {
+    let opts = &run.opts;
+    let pb = ctx.progress(opts.steps as u64, "train");
+    pb.set_position(start.step as u64);
+    pb.reset_rate();
+    let mut trainer = Trainer {
+        backend,
+        data: &run.data,
+        opts: opts.clone(),
+        checkpoint_dir: Some(checkpoint_dir.to_path_buf()),
+    };
+    let every = (opts.steps / 100).max(1);
+    let mut history: Vec<HistoryPoint> = Vec::new();
+    let (end, rep) = trainer.run(start, &mut |p| {
+        if p.step.is_multiple_of(every) || p.step == p.steps {
+            history.push(HistoryPoint {
+                step: p.step,
+                loss: p.loss,
+                psnr: p.psnr,
+                splats: p.splats,
+            });
         }
-        let outcome = TrainOutcome {
-            splats_ply: ply,
-            checkpoint: job.out.join("checkpoint.bin"),
-            backend: rep.backend.clone(),
-            train_views: train_idx.len(),
-            masked_views: masked,
-            extent,
-            init,
-            report: rep,
-            test,
-            test_renders,
-            test_lpips,
-            test_static,
-            history,
-            options: opts,
+        pb.set_position(p.step as u64);
+        if p.step.is_multiple_of(10) || p.step == p.steps {
+            pb.set_message(format!(
+                "loss {:.4} psnr {:.2} splats {}",
+                p.loss, p.psnr, p.splats
+            ));
+        }
+    })?;
+    pb.finish_and_clear();
+    Ok((end, rep, history))
+}
+
+/// The held-out scores of a trained model.
+#[derive(Default)]
+struct HeldOut {
+    test: Option<EvalReport>,
+    renders: Vec<PathBuf>,
+    lpips: Option<f64>,
+    static_scores: Option<StaticScores>,
+}
+
+/// Render the held-out views once and score them on all pixels and, where
+/// they have masks, on their static pixels; write the renders when the job
+/// asks for them.
+fn score_held_out(
+    backend: &mut dyn TrainBackend,
+    splats: &splat::Splats,
+    run: &Prepared,
+    job: &TrainJob,
+    ctx: &Ctx,
+) -> anyhow::Result<HeldOut> {
+    let mut views = load_views(&run.scene, &run.test_idx, true)?;
+    let masks: Vec<Option<Vec<f32>>> = views.iter_mut().map(|v| v.mask.take()).collect();
+    let ropts = RenderOptions {
+        background: run.opts.background,
+        sh_degree: splats.sh_degree,
+        low_pass: run.opts.low_pass,
+        antialiased: run.opts.antialiased,
+    };
+    let (ev, images) = evaluate(backend, splats, &views, &ropts)?;
+    ctx.info(format!(
+        "test views: PSNR {:.2} dB, SSIM {:.4} ({} views)",
+        ev.mean_psnr,
+        ev.mean_ssim,
+        ev.views.len()
+    ));
+    let mut net = super::eval_views::builtin_lpips()?;
+    let mut lpips = None;
+    if let Some(net) = net.as_mut() {
+        let mean = super::eval_views::mean_std(&net.score_views(&views, &images)?).0;
+        ctx.info(format!("test views: LPIPS {mean:.4}"));
+        lpips = Some(mean);
+    }
+    let mut renders = Vec::new();
+    if let Some(dir) = &job.test_renders {
+        std::fs::create_dir_all(dir).with_context(|| format!("creating {}", dir.display()))?;
+        for (v, img) in views.iter().zip(&images) {
+            let path = dir.join(format!("{}.png", super::render::stem(&v.name)));
+            let img = image::Rgb32FImage::from_raw(v.camera.width, v.camera.height, img.clone())
+                .ok_or_else(|| anyhow::anyhow!("{}: render size mismatch", v.name))?;
+            loader::io::write_png_rgb32f(&path, &img)?;
+            renders.push(path);
+        }
+    }
+    for (v, m) in views.iter_mut().zip(masks) {
+        v.mask = m;
+    }
+    let static_scores = score_static_pixels(&views, &images, net.as_mut(), ctx)?;
+    Ok(HeldOut {
+        test: Some(ev),
+        renders,
+        lpips,
+        static_scores,
+    })
+}
+
+#[cfg(test)]
+mod tests {
+    #![allow(clippy::unwrap_used, clippy::expect_used)]
+    use super::*;
+    use clap::Parser;
+
+    #[derive(Parser)]
+    struct Train {
+        #[command(flatten)]
+        args: Args,
+    }
+
+    fn parse(extra: &[&str]) -> Args {
+        let base = ["train", "--scene", "s", "--out", "o"];
+        Train::try_parse_from(base.iter().chain(extra))
+            .unwrap()
+            .args
+    }
+
+    #[test]
+    fn no_flags_give_the_library_defaults() {
+        let a = parse(&[]);
+        assert_eq!(a.train_options(), TrainOptions::default());
+        assert!(!a.flags.sparse_adam);
+    }
+
+    #[test]
+    fn every_training_flag_reaches_its_option() {
+        let a = parse(&[
+            "--steps",
+            "300",
+            "--no-masks",
+            "--max-minutes",
+            "2",
+            "--ssim-weight",
+            "0.1",
+            "--sh-degree",
+            "1",
+            "--sh-degree-every",
+            "50",
+            "--max-splats",
+            "5000",
+            "--strategy",
+            "mcmc",
+            "--densify-from",
+            "7",
+            "--densify-until",
+            "90",
+            "--densify-every",
+            "11",
+            "--grad-threshold",
+            "0.001",
+            "--opacity-reset-every",
+            "0",
+            "--prune-screen-px",
+            "20",
+            "--init",
+            "random",
+            "--random-background",
+            "--antialiased",
+            "--checkpoint-every",
+            "100",
+            "--seed",
+            "3",
+            "--sparse-adam",
+        ]);
+        let o = a.train_options();
+        let d = TrainOptions::default();
+        let expected = TrainOptions {
+            steps: 300,
+            use_masks: false,
+            time_limit_s: 120.0,
+            ssim_weight: 0.1,
+            sh_degree: 1,
+            sh_degree_every: 50,
+            strategy: splat::strategy::DefaultStrategyOptions {
+                max_splats: 5000,
+                densify_from: 7,
+                densify_until: 90,
+                densify_every: 11,
+                grad_threshold: 0.001,
+                opacity_reset_every: 0,
+                prune_screen_px: 20.0,
+                ..d.strategy.clone()
+            },
+            strategy_kind: splat::strategy::StrategyKind::Mcmc,
+            mcmc: splat::strategy::McmcStrategyOptions {
+                cap_max: 5000,
+                ..d.mcmc.clone()
+            },
+            init: splat::train::InitMode::Random,
+            random_background: true,
+            antialiased: true,
+            checkpoint_every: 100,
+            seed: 3,
+            ..d
         };
-        loader::io::write_bytes_atomic(
-            stage.path().join("summary.json"),
-            serde_json::to_string_pretty(&outcome)?.as_bytes(),
-        )?;
-        Ok(outcome)
-    })();
-    let outcome = staged.map_err(|e| anyhow::anyhow!(stage.public(&format!("{e:#}"))))?;
-    stage.commit()?;
-    Ok(outcome)
+        assert_eq!(o, expected);
+        assert!(a.job().sparse_adam);
+    }
 }

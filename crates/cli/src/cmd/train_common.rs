@@ -40,16 +40,8 @@ impl VariantResult {
             lpips: outcome.test_lpips,
             splats: outcome.report.splats,
             seconds,
-            loss_curve: outcome
-                .history
-                .iter()
-                .map(|h| (h.step as f64, h.loss as f64))
-                .collect(),
-            psnr_curve: outcome
-                .history
-                .iter()
-                .map(|h| (h.step as f64, h.psnr as f64))
-                .collect(),
+            loss_curve: outcome.loss_curve(),
+            psnr_curve: outcome.psnr_curve(),
             renders: outcome.test_renders,
         }
     }
@@ -68,7 +60,7 @@ pub fn short_schedule(steps: u32, use_masks: bool) -> TrainOptions {
     let every = (s / 8).clamp(1, 250);
     let cap = if s <= 500 { 20_000 } else { 60_000 };
     let d = TrainOptions::default();
-    TrainOptions {
+    let mut o = TrainOptions {
         steps: s,
         use_masks,
         sh_degree_every: (s / 8).max(1),
@@ -80,12 +72,10 @@ pub fn short_schedule(steps: u32, use_masks: bool) -> TrainOptions {
             opacity_reset_every: 0,
             ..d.strategy
         },
-        mcmc: splat::strategy::McmcStrategyOptions {
-            cap_max: d.mcmc.cap_max.min(cap),
-            ..d.mcmc
-        },
         ..d
-    }
+    };
+    o.cap_mcmc_at_max_splats();
+    o
 }
 
 /// Train `job` (its held-out renders go to `job.out/renders` unless the job

@@ -34,37 +34,55 @@ use rand::SeedableRng;
 use rand_distr_normal::sample_normal;
 use serde::{Deserialize, Serialize};
 
-/// Options of [`DefaultStrategy`]; defaults are INRIA's.
+/// Options of [`DefaultStrategy`]; defaults are INRIA's. With the `cli`
+/// feature the options a user tunes are flags (`--densify-from`, …,
+/// `--max-splats`); the others keep their defaults.
 #[derive(Debug, Clone, Serialize, Deserialize, PartialEq)]
+#[cfg_attr(feature = "cli", derive(clap::Args))]
 pub struct DefaultStrategyOptions {
     /// First step at which densification may run (INRIA `densify_from_iter`, 500).
+    #[cfg_attr(feature = "cli", arg(long, default_value_t = DefaultStrategyOptions::default().densify_from))]
     pub densify_from: u32,
     /// Last step (exclusive) of densification (`densify_until_iter`, 15 000).
+    #[cfg_attr(feature = "cli", arg(long, default_value_t = DefaultStrategyOptions::default().densify_until))]
     pub densify_until: u32,
     /// Steps between densifications (`densification_interval`, 100).
+    #[cfg_attr(feature = "cli", arg(long, default_value_t = DefaultStrategyOptions::default().densify_every))]
     pub densify_every: u32,
     /// Mean NDC positional-gradient threshold (`densify_grad_threshold`, 2e-4).
+    #[cfg_attr(feature = "cli", arg(long, default_value_t = DefaultStrategyOptions::default().grad_threshold))]
     pub grad_threshold: f32,
     /// Clone/split boundary as a fraction of the scene extent (`percent_dense`, 0.01).
+    #[cfg_attr(feature = "cli", arg(skip = DefaultStrategyOptions::default().percent_dense))]
     pub percent_dense: f32,
     /// Samples per split (2); their scale is divided by 0.8 × this (1.6).
+    #[cfg_attr(feature = "cli", arg(skip = DefaultStrategyOptions::default().split_count))]
     pub split_count: u32,
     /// Prune below this opacity (0.005).
+    #[cfg_attr(feature = "cli", arg(skip = DefaultStrategyOptions::default().prune_opacity))]
     pub prune_opacity: f32,
     /// Prune splats whose 3σ screen radius exceeded this many pixels in a
     /// view since the last refinement, after the first opacity reset
-    /// (INRIA `size_threshold` 20; default 0 = off, as gsplat — see the
-    /// module note for the measurement).
+    /// (INRIA `size_threshold` 20; default 0 = off, as gsplat: at low
+    /// resolution the 20 px rule removes the large splats that carry the
+    /// background, measured in the module note).
+    #[cfg_attr(feature = "cli", arg(long, default_value_t = DefaultStrategyOptions::default().prune_screen_px))]
     pub prune_screen_px: f32,
     /// Prune larger than this fraction of the extent in the world (0.1).
+    #[cfg_attr(feature = "cli", arg(skip = DefaultStrategyOptions::default().prune_world_fraction))]
     pub prune_world_fraction: f32,
     /// Steps between opacity resets (`opacity_reset_interval`, 3000; 0 = never).
+    #[cfg_attr(feature = "cli", arg(long, default_value_t = DefaultStrategyOptions::default().opacity_reset_every))]
     pub opacity_reset_every: u32,
     /// Opacity after a reset is min(current, this) (0.01).
+    #[cfg_attr(feature = "cli", arg(skip = DefaultStrategyOptions::default().opacity_reset_value))]
     pub opacity_reset_value: f32,
-    /// Maximum number of splats (cap; INRIA has none).
+    /// Maximum number of splats (cap; INRIA has none). On the command line
+    /// it caps the MCMC strategy too (the smaller of this and its `cap_max`).
+    #[cfg_attr(feature = "cli", arg(long, default_value_t = DefaultStrategyOptions::default().max_splats))]
     pub max_splats: usize,
     /// Prune splats culled in every training view (see the module note; on).
+    #[cfg_attr(feature = "cli", arg(skip = DefaultStrategyOptions::default().prune_unseen))]
     pub prune_unseen: bool,
 }
 

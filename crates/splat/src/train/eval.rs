@@ -34,23 +34,29 @@ pub fn evaluate(
     views: &[View],
     opts: &RenderOptions,
 ) -> Result<(EvalReport, Vec<Vec<f32>>)> {
+    let images = views
+        .iter()
+        .map(|v| Ok(backend.render(splats, &v.camera, opts)?.image))
+        .collect::<Result<Vec<_>>>()?;
+    Ok((score_images(views, &images), images))
+}
+
+/// Score rendered `images` against their `views` (in the same order);
+/// `View::mask` restricts the metrics when present, so one render can be
+/// scored on all pixels and on its static pixels.
+pub fn score_images(views: &[View], images: &[Vec<f32>]) -> EvalReport {
     let mut rep = EvalReport::default();
-    let mut images = Vec::with_capacity(views.len());
-    for v in views {
-        let out = backend.render(splats, &v.camera, opts)?;
+    for (v, image) in views.iter().zip(images) {
         let (w, h) = (v.camera.width as usize, v.camera.height as usize);
         let m = v.mask.as_deref();
-        let p = psnr(&out.image, &v.image, m).unwrap_or(f64::NAN);
-        let s = ssim(&out.image, &v.image, w, h, m).unwrap_or(f64::NAN);
         rep.views.push(ViewScore {
             name: v.name.clone(),
-            psnr: p,
-            ssim: s,
+            psnr: psnr(image, &v.image, m).unwrap_or(f64::NAN),
+            ssim: ssim(image, &v.image, w, h, m).unwrap_or(f64::NAN),
         });
-        images.push(out.image);
     }
     let n = rep.views.len().max(1) as f64;
     rep.mean_psnr = rep.views.iter().map(|v| v.psnr).sum::<f64>() / n;
     rep.mean_ssim = rep.views.iter().map(|v| v.ssim).sum::<f64>() / n;
-    Ok((rep, images))
+    rep
 }

@@ -1,7 +1,7 @@
 //! Training options with INRIA 3DGS defaults (Kerbl et al. 2023,
 //! `arguments/__init__.py` `OptimizationParams`), each documented.
 
-use crate::backend::LearningRates;
+use crate::backend::{LearningRates, LossConfig};
 use crate::strategy::{DefaultStrategyOptions, McmcStrategyOptions, StrategyKind};
 use serde::{Deserialize, Serialize};
 
@@ -17,69 +17,100 @@ pub enum InitMode {
     Random,
 }
 
-/// Every knob of a training run.
+/// Every knob of a training run. With the `cli` feature it derives
+/// `clap::Args`: the algorithm options a user tunes are flags with these
+/// defaults; the run's length, masks and time limit (`steps`, `use_masks`,
+/// `time_limit_s`) are set by each command (`train --steps --no-masks
+/// --max-minutes`, `run`'s plan, `onthego --steps`), and the learning rates,
+/// background, low-pass, MCMC and init details keep their defaults.
 #[derive(Debug, Clone, Serialize, Deserialize, PartialEq)]
+#[cfg_attr(feature = "cli", derive(clap::Args))]
 pub struct TrainOptions {
     /// Optimisation steps (INRIA: 30 000).
+    #[cfg_attr(feature = "cli", arg(skip = TrainOptions::default().steps))]
     pub steps: u32,
     /// Initial learning rate of the means, × scene extent (INRIA 1.6e-4).
+    #[cfg_attr(feature = "cli", arg(skip = TrainOptions::default().lr_means_init))]
     pub lr_means_init: f32,
     /// Final learning rate of the means, × scene extent (1.6e-6); the rate
     /// decays log-linearly from init to final over `steps` (INRIA over
     /// `position_lr_max_steps` = 30 000, its default run length).
+    #[cfg_attr(feature = "cli", arg(skip = TrainOptions::default().lr_means_final))]
     pub lr_means_final: f32,
     /// SH DC learning rate (`feature_lr`, 2.5e-3).
+    #[cfg_attr(feature = "cli", arg(skip = TrainOptions::default().lr_sh_dc))]
     pub lr_sh_dc: f32,
     /// Higher SH learning rate (`feature_lr / 20`, 1.25e-4).
+    #[cfg_attr(feature = "cli", arg(skip = TrainOptions::default().lr_sh_rest))]
     pub lr_sh_rest: f32,
     /// Opacity-logit learning rate (0.05).
+    #[cfg_attr(feature = "cli", arg(skip = TrainOptions::default().lr_opacity))]
     pub lr_opacity: f32,
     /// Log-scale learning rate (5e-3).
+    #[cfg_attr(feature = "cli", arg(skip = TrainOptions::default().lr_scales))]
     pub lr_scales: f32,
     /// Quaternion learning rate (1e-3).
+    #[cfg_attr(feature = "cli", arg(skip = TrainOptions::default().lr_rotations))]
     pub lr_rotations: f32,
     /// Highest SH degree (3).
+    #[cfg_attr(feature = "cli", arg(long, default_value_t = TrainOptions::default().sh_degree))]
     pub sh_degree: u32,
     /// Steps between SH degree increments (1000).
+    #[cfg_attr(feature = "cli", arg(long, default_value_t = TrainOptions::default().sh_degree_every))]
     pub sh_degree_every: u32,
     /// D-SSIM weight λ (0.2; 0 disables SSIM as SLS does).
+    #[cfg_attr(feature = "cli", arg(long, default_value_t = TrainOptions::default().ssim_weight))]
     pub ssim_weight: f32,
     /// Background colour behind the splats (black).
+    #[cfg_attr(feature = "cli", arg(skip = TrainOptions::default().background))]
     pub background: [f32; 3],
     /// Draw a uniformly random background each step instead (INRIA
     /// `--random_background`; off).
+    #[cfg_attr(feature = "cli", arg(long))]
     pub random_background: bool,
     /// Mip-Splatting/gsplat antialiased rendering (off).
+    #[cfg_attr(feature = "cli", arg(long))]
     pub antialiased: bool,
     /// Screen-space dilation (px², 0.3).
+    #[cfg_attr(feature = "cli", arg(skip = TrainOptions::default().low_pass))]
     pub low_pass: f32,
     /// Densification (INRIA adaptive density control).
+    #[cfg_attr(feature = "cli", command(flatten))]
     pub strategy: DefaultStrategyOptions,
     /// Which densification strategy runs: `default` (INRIA, the options in
     /// `strategy`) or `mcmc` (3DGS-MCMC, the options in `mcmc`). Default: `default`.
     #[serde(default)]
+    #[cfg_attr(feature = "cli", arg(long = "strategy", value_name = "STRATEGY", value_enum, default_value_t = TrainOptions::default().strategy_kind))]
     pub strategy_kind: StrategyKind,
     /// 3DGS-MCMC options (Kheradmand et al. 2024; gsplat defaults), used when
     /// `strategy_kind` is `mcmc`.
     #[serde(default)]
+    #[cfg_attr(feature = "cli", arg(skip = TrainOptions::default().mcmc))]
     pub mcmc: McmcStrategyOptions,
     /// Initialisation source.
+    #[cfg_attr(feature = "cli", arg(long, value_enum, default_value_t = TrainOptions::default().init))]
     pub init: InitMode,
     /// Splats drawn for random initialisation (INRIA synthetic: 100 000).
+    #[cfg_attr(feature = "cli", arg(skip = TrainOptions::default().random_init_count))]
     pub random_init_count: usize,
     /// Skip COLMAP points with more than this fraction of their
     /// observations on moving (masked) pixels (0.5).
+    #[cfg_attr(feature = "cli", arg(skip = TrainOptions::default().init_max_moving_fraction))]
     pub init_max_moving_fraction: f32,
     /// Use `masks/` in the loss (true; `--no-masks` sets false).
+    #[cfg_attr(feature = "cli", arg(skip = TrainOptions::default().use_masks))]
     pub use_masks: bool,
     /// Write a checkpoint every N steps (0 = only at the end).
+    #[cfg_attr(feature = "cli", arg(long, default_value_t = TrainOptions::default().checkpoint_every))]
     pub checkpoint_every: u32,
     /// Wall-clock budget in seconds (0 = none): training stops after the
     /// first step that ends past it, and the report gives the steps done.
     /// The learning-rate schedule stays that of a `steps`-long run.
     #[serde(default)]
+    #[cfg_attr(feature = "cli", arg(skip = TrainOptions::default().time_limit_s))]
     pub time_limit_s: f64,
     /// Random seed (view order, split sampling, random init and background).
+    #[cfg_attr(feature = "cli", arg(long, default_value_t = TrainOptions::default().seed))]
     pub seed: u64,
 }
 
@@ -96,7 +127,7 @@ impl Default for TrainOptions {
             lr_rotations: 1e-3,
             sh_degree: 3,
             sh_degree_every: 1000,
-            ssim_weight: 0.2,
+            ssim_weight: LossConfig::default().ssim_weight,
             background: [0.0; 3],
             random_background: false,
             antialiased: false,
@@ -179,6 +210,12 @@ impl TrainOptions {
             scales: self.lr_scales,
             rotations: self.lr_rotations,
         }
+    }
+
+    /// Cap the MCMC strategy's splat count at `strategy.max_splats` too, as
+    /// the command line's `--max-splats` does for both strategies.
+    pub fn cap_mcmc_at_max_splats(&mut self) {
+        self.mcmc.cap_max = self.mcmc.cap_max.min(self.strategy.max_splats);
     }
 
     /// Active SH degree at (0-based) step `step`: +1 every `sh_degree_every`.
