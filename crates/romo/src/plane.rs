@@ -76,6 +76,33 @@ impl Plane {
         a + fy * (b - a)
     }
 
+    /// Bilinear samples of four planes of this plane's size at one point
+    /// (each exactly [`Plane::bilinear`]'s value).
+    #[inline]
+    pub fn bilinear4(planes: [&Plane; 4], x: f32, y: f32) -> [f32; 4] {
+        let p = planes[0];
+        let xm = (p.w - 1) as f32;
+        let ym = (p.h - 1) as f32;
+        let x = x.clamp(0.0, xm);
+        let y = y.clamp(0.0, ym);
+        let x0 = x.floor();
+        let y0 = y.floor();
+        let fx = x - x0;
+        let fy = y - y0;
+        let x0 = x0 as usize;
+        let y0 = y0 as usize;
+        let x1 = (x0 + 1).min(p.w - 1);
+        let y1 = (y0 + 1).min(p.h - 1);
+        let r0 = y0 * p.w;
+        let r1 = y1 * p.w;
+        planes.map(|q| {
+            let d = &q.data;
+            let a = d[r0 + x0] + fx * (d[r0 + x1] - d[r0 + x0]);
+            let b = d[r1 + x0] + fx * (d[r1 + x1] - d[r1 + x0]);
+            a + fy * (b - a)
+        })
+    }
+
     /// Resize with bilinear interpolation (pixel-centre aligned). When
     /// shrinking by more than 2×, the source is box-averaged first so the
     /// result is not aliased.
@@ -83,9 +110,9 @@ impl Plane {
         if nw == self.w && nh == self.h {
             return self.clone();
         }
-        let mut src = self.clone();
+        let mut src = std::borrow::Cow::Borrowed(self);
         while src.w >= 2 * nw.max(1) * 2 && src.h >= 2 * nh.max(1) * 2 {
-            src = src.half();
+            src = std::borrow::Cow::Owned(src.half());
         }
         let sx = src.w as f32 / nw as f32;
         let sy = src.h as f32 / nh as f32;

@@ -239,8 +239,20 @@ pub fn fast_guided_filter_rgb(i: &Rgb, p: &Plane, r: usize, eps: f32, s: usize) 
     }
     let (w, h) = (i.w().div_ceil(s).max(1), i.h().div_ceil(s).max(1));
     let (a, b) = guided_coefficients_rgb(&i.resize(w, h), &p.resize(w, h), (r / s).max(1), eps);
-    let up = |q: &Plane| q.resize(i.w(), i.h());
-    apply_coefficients_rgb(&[up(&a[0]), up(&a[1]), up(&a[2])], &up(&b), i)
+    // The coefficients upsampled as `Plane::resize` does (pixel-centre
+    // aligned bilinear) and applied in one pass.
+    let (fw, fh) = (i.w(), i.h());
+    let sx = w as f32 / fw as f32;
+    let sy = h as f32 / fh as f32;
+    Plane::from_fn(fw, fh, |x, y| {
+        let j = y * fw + x;
+        let [a0, a1, a2, bb] = Plane::bilinear4(
+            [&a[0], &a[1], &a[2], &b],
+            (x as f32 + 0.5) * sx - 0.5,
+            (y as f32 + 0.5) * sy - 0.5,
+        );
+        a0 * i.c[0].data[j] + a1 * i.c[1].data[j] + a2 * i.c[2].data[j] + bb
+    })
 }
 
 /// Temporal smoothing of a sequence of probability maps (same size).
