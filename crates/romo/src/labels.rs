@@ -151,7 +151,13 @@ pub struct LabelOptions {
     /// depth. Default false: DAVIS 8 sequences mean J 0.693 → 0.697 (goat
     /// 0.558 → 0.576), fox + DAVIS composite 0.624 → 0.594; `--occlusion`
     /// turns it on.
-    #[cfg_attr(feature = "cli", arg(long))]
+    #[cfg_attr(
+        feature = "cli",
+        arg(
+            long,
+            help = "Occlusion-order test: a pixel that hides, in the next frame, a pixel with more parallax than its own is moving (an object the camera follows; off by default)"
+        )
+    )]
     pub occlusion: bool,
     /// U threshold of the occlusion-order test as a factor on v: the
     /// hidden pixel's parallax must exceed the occluder's by this × v
