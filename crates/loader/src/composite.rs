@@ -16,13 +16,13 @@
 //! `gt_motion/<stem>.png` (255 where a distractor pixel was pasted),
 //! `split.json` and `transforms.json` (intrinsics scaled to the output size).
 
-use crate::davis::Davis;
+use crate::davis::{Davis, DavisSequence};
 use crate::error::{LoaderError, Result};
 use crate::io::{read_gray8, read_rgb8, write_png_gray8, write_png_rgb8};
 use crate::masks::gt_motion_path;
 use crate::scene::list_images;
 use crate::split::{Split, write_split};
-use crate::transforms::{read_transforms, resolve_image_path, write_transforms};
+use crate::transforms::{Transforms, read_transforms, resolve_image_path, write_transforms};
 use image::imageops::FilterType;
 use image::{GrayImage, RgbImage};
 use rand::{Rng, SeedableRng};
@@ -269,32 +269,8 @@ pub fn composite(
         return Err(missing(tp, "background transforms.json"));
     }
     let mut transforms = read_transforms(&tp)?;
-    let davis = Davis::open(davis_root, &opts.resolution)?;
-    let seq_names = if opts.sequences.is_empty() {
-        davis.sequences()?
-    } else {
-        opts.sequences.clone()
-    };
-    let mut sequences = Vec::new();
-    for s in &seq_names {
-        let seq = davis.sequence(s)?;
-        if seq.frames.is_empty() {
-            return Err(LoaderError::format(
-                &davis.root,
-                format!("sequence {s} has no frames"),
-            ));
-        }
-        sequences.push(seq);
-    }
-    if sequences.is_empty() {
-        return Err(LoaderError::format(davis_root, "no DAVIS sequences"));
-    }
     let mut rng = rand_pcg::Pcg64::seed_from_u64(opts.seed);
-    // Seeded order of sequences (Fisher–Yates), cycled over the runs.
-    for i in (1..sequences.len()).rev() {
-        let j = rng.random_range(0..=i);
-        sequences.swap(i, j);
-    }
+    let sequences = shuffled_sequences(davis_root, opts, &mut rng)?;
 
     for d in ["images", "clean", "gt_motion"] {
         let p = out.join(d);
@@ -311,48 +287,11 @@ pub fn composite(
     let clutter_idx: Vec<usize> = (0..names.len())
         .filter(|i| i % opts.test_every != 0)
         .collect();
-    // Per run state: (sequence, start DAVIS frame, scale fraction, path).
-    struct Run {
-        seq: usize,
-        start: usize,
-        height_frac: f64,
-        x_from: f64,
-        x_to: f64,
-        y_bottom: f64,
-    }
-    let mut runs = Vec::new();
-    for r in 0..clutter_idx.len().div_ceil(opts.run_length) {
-        let seq = r % sequences.len();
-        let span = (opts.run_length - 1) * opts.davis_stride + 1;
-        let n = sequences[seq].frames.len();
-        let start = if n > span {
-            rng.random_range(0..n - span)
-        } else {
-            0
-        };
-        let [a, b] = opts.object_height;
-        let (p, q) = (rng.random_range(0.1..0.35), rng.random_range(0.65..0.9));
-        let flip = rng.random_bool(0.5);
-        runs.push(Run {
-            seq,
-            start,
-            height_frac: if b > a { rng.random_range(a..=b) } else { a },
-            x_from: if flip { q } else { p },
-            x_to: if flip { p } else { q },
-            y_bottom: rng.random_range(0.75..0.98),
-        });
-    }
+    let runs = plan_runs(clutter_idx.len(), &sequences, opts, &mut rng);
 
     for (i, name) in names.iter().enumerate() {
-        let src = background.join("images").join(name);
-        let full = read_rgb8(&src)?;
-        let s = |v: u32| ((v as f64 / opts.downscale as f64).round() as u32).max(1);
-        let (w, h) = (s(full.width()), s(full.height()));
-        let mut img = if (w, h) == full.dimensions() {
-            full
-        } else {
-            image::imageops::resize(&full, w, h, FilterType::Triangle)
-        };
+        let mut img = downscaled(&background.join("images").join(name), opts.downscale)?;
+        let (w, h) = img.dimensions();
         report.width = w;
         report.height = h;
         let out_name = format!("{}.png", stem(name));
@@ -366,25 +305,10 @@ pub fn composite(
             let fi = (run.start + t * opts.davis_stride) % seq.frames.len();
             let f = &seq.frames[fi];
             let (obj, mask) = davis_frame(&f.image, f.annotation.as_ref(), &seq.name)?;
-            let mut n = 0;
-            if let Some((bx0, by0, bx1, by1)) = mask_bbox(&mask) {
-                let (bw, bh) = ((bx1 - bx0) as f64, (by1 - by0) as f64);
-                let scale =
-                    (run.height_frac * h as f64 / bh).min(opts.max_object_width * w as f64 / bw);
-                let frac = if opts.run_length > 1 {
-                    t as f64 / (opts.run_length - 1) as f64
-                } else {
-                    0.5
-                };
-                let cx = (run.x_from + (run.x_to - run.x_from) * frac) * w as f64;
-                let bottom = run.y_bottom * h as f64;
-                let place = Placement {
-                    scale,
-                    offset_x: cx - scale * (bx0 as f64 + bw / 2.0),
-                    offset_y: bottom - scale * by1 as f64,
-                };
-                n = paste(&mut img, &mut moving, &obj, &mask, place);
-            }
+            let n = match run.placement(&mask, t, (w, h), opts) {
+                Some(place) => paste(&mut img, &mut moving, &obj, &mask, place),
+                None => 0,
+            };
             let cov = n as f64 / (w as f64 * h as f64);
             report.coverage_mean += cov;
             report.coverage_min = report.coverage_min.min(cov);
@@ -405,16 +329,163 @@ pub fn composite(
         report.coverage_min = 0.0;
     }
 
-    // transforms.json: file paths renamed, intrinsics scaled to the output size.
+    rename_and_rescale(
+        &mut transforms,
+        background,
+        &tp,
+        &new_name,
+        (report.width, report.height),
+    )?;
+    write_transforms(out.join("transforms.json"), &transforms)?;
+    write_split(
+        out.join("split.json"),
+        &Split::from_names(&clutter, &extra, None),
+    )?;
+    report.frames = names.len();
+    report.clutter = clutter.len();
+    report.extra = extra.len();
+    Ok(report)
+}
+
+/// The DAVIS sequences to paste (all, or `opts.sequences`), each with frames,
+/// in a seeded order (Fisher–Yates) that the runs cycle over.
+fn shuffled_sequences(
+    davis_root: &Path,
+    opts: &CompositeOptions,
+    rng: &mut rand_pcg::Pcg64,
+) -> Result<Vec<DavisSequence>> {
+    let davis = Davis::open(davis_root, &opts.resolution)?;
+    let seq_names = if opts.sequences.is_empty() {
+        davis.sequences()?
+    } else {
+        opts.sequences.clone()
+    };
+    let mut sequences = Vec::new();
+    for s in &seq_names {
+        let seq = davis.sequence(s)?;
+        if seq.frames.is_empty() {
+            return Err(LoaderError::format(
+                &davis.root,
+                format!("sequence {s} has no frames"),
+            ));
+        }
+        sequences.push(seq);
+    }
+    if sequences.is_empty() {
+        return Err(LoaderError::format(davis_root, "no DAVIS sequences"));
+    }
+    for i in (1..sequences.len()).rev() {
+        let j = rng.random_range(0..=i);
+        sequences.swap(i, j);
+    }
+    Ok(sequences)
+}
+
+/// One run of `opts.run_length` clutter frames: one DAVIS sequence from a
+/// start frame, its object at one size walking along one path.
+struct Run {
+    seq: usize,
+    start: usize,
+    /// Object height as a fraction of the frame height.
+    height_frac: f64,
+    /// Horizontal path of the object's centre, as fractions of the width.
+    x_from: f64,
+    x_to: f64,
+    /// The object's bottom, as a fraction of the height.
+    y_bottom: f64,
+}
+
+impl Run {
+    /// Where the object of `mask` goes in frame `t` of the run, in a `w×h`
+    /// frame; `None` when the mask is empty.
+    fn placement(
+        &self,
+        mask: &GrayImage,
+        t: usize,
+        (w, h): (u32, u32),
+        opts: &CompositeOptions,
+    ) -> Option<Placement> {
+        let (bx0, by0, bx1, by1) = mask_bbox(mask)?;
+        let (bw, bh) = ((bx1 - bx0) as f64, (by1 - by0) as f64);
+        let scale = (self.height_frac * h as f64 / bh).min(opts.max_object_width * w as f64 / bw);
+        let frac = if opts.run_length > 1 {
+            t as f64 / (opts.run_length - 1) as f64
+        } else {
+            0.5
+        };
+        let cx = (self.x_from + (self.x_to - self.x_from) * frac) * w as f64;
+        let bottom = self.y_bottom * h as f64;
+        Some(Placement {
+            scale,
+            offset_x: cx - scale * (bx0 as f64 + bw / 2.0),
+            offset_y: bottom - scale * by1 as f64,
+        })
+    }
+}
+
+/// The runs covering `clutter` frames, drawn from `rng`.
+fn plan_runs(
+    clutter: usize,
+    sequences: &[DavisSequence],
+    opts: &CompositeOptions,
+    rng: &mut rand_pcg::Pcg64,
+) -> Vec<Run> {
+    let mut runs = Vec::new();
+    for r in 0..clutter.div_ceil(opts.run_length) {
+        let seq = r % sequences.len();
+        let span = (opts.run_length - 1) * opts.davis_stride + 1;
+        let n = sequences[seq].frames.len();
+        let start = if n > span {
+            rng.random_range(0..n - span)
+        } else {
+            0
+        };
+        let [a, b] = opts.object_height;
+        let (p, q) = (rng.random_range(0.1..0.35), rng.random_range(0.65..0.9));
+        let flip = rng.random_bool(0.5);
+        runs.push(Run {
+            seq,
+            start,
+            height_frac: if b > a { rng.random_range(a..=b) } else { a },
+            x_from: if flip { q } else { p },
+            x_to: if flip { p } else { q },
+            y_bottom: rng.random_range(0.75..0.98),
+        });
+    }
+    runs
+}
+
+/// The background image `src`, downscaled by `downscale` (each side rounded,
+/// at least 1 px).
+fn downscaled(src: &Path, downscale: u32) -> Result<RgbImage> {
+    let full = read_rgb8(src)?;
+    let s = |v: u32| ((v as f64 / downscale as f64).round() as u32).max(1);
+    let (w, h) = (s(full.width()), s(full.height()));
+    Ok(if (w, h) == full.dimensions() {
+        full
+    } else {
+        image::imageops::resize(&full, w, h, FilterType::Triangle)
+    })
+}
+
+/// transforms.json of the composite: file paths renamed to the written
+/// images, intrinsics scaled to the output size `(w, h)`.
+fn rename_and_rescale(
+    transforms: &mut Transforms,
+    background: &Path,
+    tp: &Path,
+    new_name: &HashMap<String, String>,
+    (w, h): (u32, u32),
+) -> Result<()> {
     let sx = |v: Option<f64>, r: f64| v.map(|v| v * r);
     let scale_fields = |f: &mut crate::transforms::IntrinsicFields, w0: f64, h0: f64| {
-        let (rx, ry) = (report.width as f64 / w0, report.height as f64 / h0);
+        let (rx, ry) = (w as f64 / w0, h as f64 / h0);
         f.fl_x = sx(f.fl_x, rx);
         f.fl_y = sx(f.fl_y, ry);
         f.cx = sx(f.cx, rx);
         f.cy = sx(f.cy, ry);
-        f.w = f.w.map(|_| report.width as f64);
-        f.h = f.h.map(|_| report.height as f64);
+        f.w = f.w.map(|_| w as f64);
+        f.h = f.h.map(|_| h as f64);
     };
     let global_size = transforms.intrinsics.w.zip(transforms.intrinsics.h);
     for (idx, fr) in transforms.frames.iter_mut().enumerate() {
@@ -426,7 +497,7 @@ pub fn composite(
             .unwrap_or_default();
         let nn = new_name.get(&name).ok_or_else(|| {
             LoaderError::format(
-                &tp,
+                tp,
                 format!("frame {idx}: {} is not in images/", fr.file_path),
             )
         })?;
@@ -435,7 +506,7 @@ pub fn composite(
             scale_fields(&mut fr.intrinsics, w0, h0);
         } else if fr.intrinsics.fl_x.is_some() {
             return Err(LoaderError::format(
-                &tp,
+                tp,
                 format!("frame {idx}: focal length given without w/h; cannot rescale"),
             ));
         }
@@ -445,19 +516,11 @@ pub fn composite(
         scale_fields(&mut transforms.intrinsics, w0, h0);
     } else if transforms.intrinsics.fl_x.is_some() {
         return Err(LoaderError::format(
-            &tp,
+            tp,
             "focal length given without w/h; cannot rescale",
         ));
     }
-    write_transforms(out.join("transforms.json"), &transforms)?;
-    write_split(
-        out.join("split.json"),
-        &Split::from_names(&clutter, &extra, None),
-    )?;
-    report.frames = names.len();
-    report.clutter = clutter.len();
-    report.extra = extra.len();
-    Ok(report)
+    Ok(())
 }
 
 #[cfg(test)]

@@ -8,7 +8,7 @@
 //! lit by a fixed sun with a Lambertian factor per face (view independent).
 
 use super::raster::{Tri, Vertex};
-use super::spec::{PedestrianSpec, SceneSpec};
+use super::spec::{PedestrianSpec, SceneSpec, WorldSpec};
 use super::texture::{Pattern, Rgb, Style, Texture, mix64};
 use nalgebra::{Rotation3, Vector3};
 use rand::{Rng, SeedableRng};
@@ -177,22 +177,11 @@ fn seg_dist(p: [f64; 2], a: [f64; 2], b: [f64; 2]) -> f64 {
     (p[0] - a[0] - t * dx).hypot(p[1] - a[1] - t * dy)
 }
 
-impl World {
-    /// Build the world of `spec` (deterministic from `spec.seed`).
-    pub fn build(spec: &SceneSpec) -> World {
-        let w = &spec.world;
-        let mut b = Builder {
-            tris: Vec::new(),
-            textures: Vec::new(),
-            rng: Pcg64::seed_from_u64(mix64(spec.seed ^ 0x5EED_0001)),
-            tpm: w.texels_per_meter,
-        };
-        let (hx, yb) = (w.length / 2.0, w.building_distance);
-        let y_back = spec.camera.eye.iter().map(|e| e[1]).fold(0.0f64, f64::min) - 6.0;
-        let y_far = yb + 2.5;
-        // Ground (texture v runs from the far edge at the top to the near edge).
-        let pal = jitter_palette(EARTH[b.rng.random_range(0..2)], &mut b.rng, 0.04);
-        b.face(
+impl Builder {
+    /// The ground (texture v runs from the far edge at the top to the near edge).
+    fn ground(&mut self, hx: f64, y_back: f64, y_far: f64) {
+        let pal = jitter_palette(EARTH[self.rng.random_range(0..2)], &mut self.rng, 0.04);
+        self.face(
             [
                 V3::new(-hx, y_back, 0.0),
                 V3::new(hx, y_back, 0.0),
@@ -202,7 +191,10 @@ impl World {
             Pattern::Paving,
             pal,
         );
-        // Side walls closing the street, facing inwards.
+    }
+
+    /// Side walls closing the street at x = ±`hx`, facing inwards.
+    fn side_walls(&mut self, hx: f64, y_back: f64, y_far: f64) {
         for side in [-1.0, 1.0] {
             let x = side * hx;
             let y_near = y_back + 5.0;
@@ -211,8 +203,8 @@ impl World {
             } else {
                 (y_near, y_far)
             };
-            let pal = jitter_palette(EARTH[3], &mut b.rng, 0.08);
-            b.face(
+            let pal = jitter_palette(EARTH[3], &mut self.rng, 0.08);
+            self.face(
                 [
                     V3::new(x, ya, 0.0),
                     V3::new(x, yc, 0.0),
@@ -223,19 +215,23 @@ impl World {
                 pal,
             );
         }
-        // A row of buildings with staggered façades.
+    }
+
+    /// A row of buildings with staggered façades from x = −`hx` to `hx`, the
+    /// front at depth `yb` or up to 1.2 m behind it.
+    fn buildings(&mut self, w: &WorldSpec, hx: f64, yb: f64) {
         let mut x = -hx;
         while x < hx - 0.1 {
-            let bw = b.rng.random_range(3.0..7.0f64).min(hx - x);
-            let h = b
+            let bw = self.rng.random_range(3.0..7.0f64).min(hx - x);
+            let h = self
                 .rng
                 .random_range(w.building_height[0]..=w.building_height[1]);
-            let yf = yb + b.rng.random_range(0.0..1.2);
-            let brick = b.rng.random_bool(0.6);
-            let pal = jitter_palette(EARTH[b.rng.random_range(0..4)], &mut b.rng, 0.06);
+            let yf = yb + self.rng.random_range(0.0..1.2);
+            let brick = self.rng.random_bool(0.6);
+            let pal = jitter_palette(EARTH[self.rng.random_range(0..4)], &mut self.rng, 0.06);
             // Roofs are never seen from street level; sides only between staggered façades.
             let c = box_corners(V3::new(x, yf, 0.0), V3::new(x + bw, yb + 2.5, h));
-            b.solid(
+            self.solid(
                 &c,
                 if brick {
                     Pattern::Brick
@@ -247,7 +243,12 @@ impl World {
             );
             x += bw;
         }
-        // Objects at several depths, kept clear of walkers and the camera.
+    }
+
+    /// Objects at several depths in front of the buildings (depth `yb`),
+    /// kept clear of the walkers, the camera path and each other.
+    fn objects(&mut self, spec: &SceneSpec, hx: f64, yb: f64) {
+        let w = &spec.world;
         let mut keep_out: Vec<([f64; 2], [f64; 2], f64)> = spec
             .pedestrians
             .iter()
@@ -262,34 +263,11 @@ impl World {
         let mut tries = 0;
         while placed.len() < w.objects as usize && tries < 200 * (w.objects as usize + 1) {
             tries += 1;
-            let kind = b.rng.random_range(0..4u32);
-            let (sx, sy, sz): (f64, f64, f64) = match kind {
-                0 => {
-                    let s = b.rng.random_range(0.5..1.2);
-                    (
-                        s * b.rng.random_range(0.8..1.6),
-                        s,
-                        s * b.rng.random_range(0.7..1.2),
-                    )
-                }
-                1 => {
-                    let s = b.rng.random_range(0.3..0.55);
-                    (s, s, b.rng.random_range(2.2..4.0))
-                }
-                2 => (
-                    b.rng.random_range(1.0..2.0),
-                    0.12,
-                    b.rng.random_range(1.5..2.4),
-                ),
-                _ => (
-                    b.rng.random_range(1.5..2.5),
-                    b.rng.random_range(1.2..2.0),
-                    b.rng.random_range(2.2..2.8),
-                ),
-            };
-            let px = b.rng.random_range(-hx + 1.5..hx - 1.5);
-            let py = b.rng.random_range(w.object_depth[0]..=w.object_depth[1]);
-            let yaw = b.rng.random_range(-0.5..0.5f64);
+            let kind = self.rng.random_range(0..4u32);
+            let (sx, sy, sz) = self.object_size(kind);
+            let px = self.rng.random_range(-hx + 1.5..hx - 1.5);
+            let py = self.rng.random_range(w.object_depth[0]..=w.object_depth[1]);
+            let yaw = self.rng.random_range(-0.5..0.5f64);
             let r = 0.5 * sx.hypot(sy);
             if keep_out
                 .iter()
@@ -309,29 +287,61 @@ impl World {
                 V3::new(sx / 2.0, sy / 2.0, sz),
             )
             .map(|p| centre + rot * p);
-            let (pattern, pal) = match kind {
-                0 if b.rng.random_bool(0.5) => {
-                    (Pattern::Wood, jitter_palette(EARTH[2], &mut b.rng, 0.1))
-                }
-                0 => (Pattern::Checker, vivid(&mut b.rng)),
-                1 => (
-                    if b.rng.random_bool(0.5) {
-                        Pattern::Plaster
-                    } else {
-                        Pattern::Checker
-                    },
-                    jitter_palette(EARTH[b.rng.random_range(0..4)], &mut b.rng, 0.1),
-                ),
-                2 => (Pattern::Poster, vivid(&mut b.rng)),
-                _ => (Pattern::Poster, vivid(&mut b.rng)),
-            };
-            b.solid(&c, pattern, pal, &[0, 1, 2, 3, 4]);
+            let (pattern, pal) = self.object_style(kind);
+            self.solid(&c, pattern, pal, &[0, 1, 2, 3, 4]);
         }
-        // Pedestrians: textures baked once; geometry posed per frame.
+    }
+
+    /// Width, depth and height (m) of an object of `kind`: 0 a crate, 1 a
+    /// pillar, 2 a board, 3 a kiosk.
+    fn object_size(&mut self, kind: u32) -> (f64, f64, f64) {
+        let rng = &mut self.rng;
+        match kind {
+            0 => {
+                let s = rng.random_range(0.5..1.2);
+                (
+                    s * rng.random_range(0.8..1.6),
+                    s,
+                    s * rng.random_range(0.7..1.2),
+                )
+            }
+            1 => {
+                let s = rng.random_range(0.3..0.55);
+                (s, s, rng.random_range(2.2..4.0))
+            }
+            2 => (rng.random_range(1.0..2.0), 0.12, rng.random_range(1.5..2.4)),
+            _ => (
+                rng.random_range(1.5..2.5),
+                rng.random_range(1.2..2.0),
+                rng.random_range(2.2..2.8),
+            ),
+        }
+    }
+
+    /// The pattern and palette of an object of `kind`.
+    fn object_style(&mut self, kind: u32) -> (Pattern, [Rgb; 4]) {
+        let rng = &mut self.rng;
+        match kind {
+            0 if rng.random_bool(0.5) => (Pattern::Wood, jitter_palette(EARTH[2], rng, 0.1)),
+            0 => (Pattern::Checker, vivid(rng)),
+            1 => (
+                if rng.random_bool(0.5) {
+                    Pattern::Plaster
+                } else {
+                    Pattern::Checker
+                },
+                jitter_palette(EARTH[rng.random_range(0..4)], rng, 0.1),
+            ),
+            _ => (Pattern::Poster, vivid(rng)),
+        }
+    }
+
+    /// The pedestrians, their textures baked once (geometry is posed per frame).
+    fn pedestrians(&mut self, spec: &SceneSpec) -> Vec<Pedestrian> {
         let mut peds = Vec::new();
         for p in &spec.pedestrians {
             let mut mats = [0u32; 4];
-            let skin_tone = b.rng.random_range(0.35..0.95f32);
+            let skin_tone = self.rng.random_range(0.35..0.95f32);
             let skin = [[skin_tone, skin_tone * 0.78, skin_tone * 0.62]; 4];
             let hair = [
                 [0.12, 0.08, 0.05],
@@ -346,13 +356,13 @@ impl World {
                 [0.3, 0.3, 0.35],
             ];
             let styles = [
-                (Pattern::Cloth, vivid(&mut b.rng)),
+                (Pattern::Cloth, vivid(&mut self.rng)),
                 (
                     Pattern::Cloth,
-                    if b.rng.random_bool(0.5) {
+                    if self.rng.random_bool(0.5) {
                         denim
                     } else {
-                        vivid(&mut b.rng)
+                        vivid(&mut self.rng)
                     },
                 ),
                 (Pattern::Skin, skin),
@@ -362,17 +372,39 @@ impl World {
                 let style = Style {
                     pattern,
                     palette,
-                    seed: mix64(b.rng.random::<u64>()),
+                    seed: mix64(self.rng.random::<u64>()),
                 };
-                b.textures
-                    .push(Texture::bake(&style, 0.5, 0.8, b.tpm.max(96.0)));
-                *m = (b.textures.len() - 1) as u32;
+                self.textures
+                    .push(Texture::bake(&style, 0.5, 0.8, self.tpm.max(96.0)));
+                *m = (self.textures.len() - 1) as u32;
             }
             peds.push(Pedestrian {
                 spec: p.clone(),
                 materials: mats,
             });
         }
+        peds
+    }
+}
+
+impl World {
+    /// Build the world of `spec` (deterministic from `spec.seed`).
+    pub fn build(spec: &SceneSpec) -> World {
+        let w = &spec.world;
+        let mut b = Builder {
+            tris: Vec::new(),
+            textures: Vec::new(),
+            rng: Pcg64::seed_from_u64(mix64(spec.seed ^ 0x5EED_0001)),
+            tpm: w.texels_per_meter,
+        };
+        let (hx, yb) = (w.length / 2.0, w.building_distance);
+        let y_back = spec.camera.eye.iter().map(|e| e[1]).fold(0.0f64, f64::min) - 6.0;
+        let y_far = yb + 2.5;
+        b.ground(hx, y_back, y_far);
+        b.side_walls(hx, y_back, y_far);
+        b.buildings(w, hx, yb);
+        b.objects(spec, hx, yb);
+        let peds = b.pedestrians(spec);
         World {
             tris: b.tris,
             textures: b.textures,

@@ -141,24 +141,9 @@ pub fn forward_in<'r>(
         opts,
         profile,
     } = *input;
-    crate::error::check_camera(cam).map_err(|e| GpuError::InvalidInput(e.to_string()))?;
-    let low_pass_ok = opts.low_pass.is_finite() && opts.low_pass >= 0.0;
-    if !low_pass_ok || !opts.background.iter().all(|v| v.is_finite()) {
-        return Err(GpuError::InvalidInput(format!(
-            "render options low_pass {} background {:?} must be finite (low_pass ≥ 0)",
-            opts.low_pass, opts.background
-        )));
-    }
+    check_input(ctx, cam, opts)?;
     let n = params.n;
     let grid = cam.tile_grid();
-    let num_tiles = grid.0 * grid.1;
-    let pixels = cam.width as u64 * cam.height as u64;
-    if pixels * 12 > ctx.max_binding_bytes() {
-        return Err(GpuError::InvalidInput(format!(
-            "{}x{} image is too large",
-            cam.width, cam.height
-        )));
-    }
     let cam_u = CameraUniforms::new(cam, opts, n, params.sh_degree);
     let cam_buf = ctx.uniform("camera", &cam_u);
     let bin_u = ctx.uniform(
@@ -176,57 +161,7 @@ pub fn forward_in<'r>(
         Some(s) => Recorder::with_scratch(ctx, profile, s),
         None => Recorder::new(ctx, profile),
     };
-    let projected = rec.storage("projected", n as u64 * 48);
-    let depth_keys = rec.storage("depth_keys", n as u64 * 4);
-    let order = rec.storage("order", n as u64 * 4);
-    let counts = rec.storage("tile_counts", n as u64 * 4);
-    let offsets = rec.storage("tile_offsets", (n as u64 + 1) * 4);
-    let ranges = rec.storage("ranges", num_tiles as u64 * 8);
-    // Placeholders for the key buffers in the first recording (not written there).
-    let dummy = rec.storage("dummy", 16);
-    k.project.dispatch(
-        ctx,
-        &mut rec,
-        &ProjectArgs {
-            cam: &cam_buf,
-            params,
-            projected: &projected,
-        },
-    )?;
-    let first = EmitBindings {
-        u: &bin_u,
-        projected: &projected,
-        depth_keys_out: &depth_keys,
-        order: &order,
-        counts: &counts,
-        offsets: &offsets,
-        tile_keys: &dummy,
-        tile_values: &dummy,
-    };
-    if n > 0 {
-        k.emit.dispatch(ctx, &mut rec, "depth_keys", &first, n)?;
-        k.sort.dispatch(
-            ctx,
-            &k.scan,
-            &mut rec,
-            &SortArgs {
-                keys: &depth_keys,
-                values: &order,
-                n,
-                bits: 32,
-            },
-        )?;
-        k.emit.dispatch(ctx, &mut rec, "gather_counts", &first, n)?;
-    }
-    k.scan.dispatch(
-        ctx,
-        &mut rec,
-        &ScanArgs {
-            input: &counts,
-            output: &offsets,
-            n,
-        },
-    )?;
+    let binned = record_binning(ctx, k, &mut rec, &cam_buf, bin_u, params, grid)?;
     let t_sub = std::time::Instant::now();
     timings.extend(rec.finish()?);
     timings.push((
@@ -234,77 +169,23 @@ pub fn forward_in<'r>(
         t_sub.elapsed().as_secs_f64() * 1e3,
     ));
     let t_read = std::time::Instant::now();
-    let total: u64 = ctx.read_at::<u32>(&offsets, n as usize, 1)?[0] as u64;
+    let total = intersections(ctx, &binned.offsets, n)?;
     timings.push(("host:count_readback", t_read.elapsed().as_secs_f64() * 1e3));
-    if total * 4 > ctx.max_binding_bytes() {
-        return Err(GpuError::InvalidInput(format!(
-            "{total} tile intersections exceed the device's storage binding limit"
-        )));
-    }
-    let total = total as u32;
     let mut rec = match scratch {
         Some(s) => Recorder::with_scratch(ctx, profile, s),
         None => Recorder::new(ctx, profile),
     };
-    let tile_keys = rec.storage("tile_keys", total as u64 * 4);
-    let tile_values = rec.storage("tile_values", total as u64 * 4);
-    let image = rec.storage("image", pixels * 12);
-    let final_t = rec.storage("final_t", pixels * 4);
-    let last_contrib = rec.storage("last_contrib", pixels * 4);
-    if total > 0 {
-        let second = EmitBindings {
-            tile_keys: &tile_keys,
-            tile_values: &tile_values,
-            ..first
-        };
-        k.emit.dispatch(ctx, &mut rec, "emit", &second, n)?;
-        let bits = bits_for(num_tiles.saturating_sub(1));
-        k.sort.dispatch(
-            ctx,
-            &k.scan,
-            &mut rec,
-            &SortArgs {
-                keys: &tile_keys,
-                values: &tile_values,
-                n: total,
-                bits,
-            },
-        )?;
-    }
-    k.ranges.dispatch(
-        ctx,
-        &mut rec,
-        &RangeArgs {
-            tile_keys: &tile_keys,
-            ranges: &ranges,
-            n: total,
-            num_tiles,
-        },
-    )?;
-    k.rasterize.dispatch(
-        ctx,
-        &mut rec,
-        &RasterBindings {
-            cam: &cam_buf,
-            projected: &projected,
-            tile_values: &tile_values,
-            ranges: &ranges,
-            image: &image,
-            final_t: &final_t,
-            last_contrib: &last_contrib,
-        },
-        grid,
-    )?;
+    let raster = record_raster(ctx, k, &mut rec, &cam_buf, &binned, cam, total)?;
     Ok((
         ForwardState {
             cam: cam_buf,
             cam_u,
-            projected,
-            tile_values,
-            ranges,
-            image,
-            final_t,
-            last_contrib,
+            projected: binned.projected,
+            tile_values: raster.tile_values,
+            ranges: binned.ranges,
+            image: raster.image,
+            final_t: raster.final_t,
+            last_contrib: raster.last_contrib,
             intersections: total,
             width: cam.width,
             height: cam.height,
@@ -314,6 +195,206 @@ pub fn forward_in<'r>(
         timings,
         rec,
     ))
+}
+
+/// The camera, the render options and the image size the device can hold.
+fn check_input(ctx: &GpuContext, cam: &RenderCamera, opts: &RenderOptions) -> Result<(), GpuError> {
+    crate::error::check_camera(cam).map_err(|e| GpuError::InvalidInput(e.to_string()))?;
+    let low_pass_ok = opts.low_pass.is_finite() && opts.low_pass >= 0.0;
+    if !low_pass_ok || !opts.background.iter().all(|v| v.is_finite()) {
+        return Err(GpuError::InvalidInput(format!(
+            "render options low_pass {} background {:?} must be finite (low_pass ≥ 0)",
+            opts.low_pass, opts.background
+        )));
+    }
+    let pixels = cam.width as u64 * cam.height as u64;
+    if pixels * 12 > ctx.max_binding_bytes() {
+        return Err(GpuError::InvalidInput(format!(
+            "{}x{} image is too large",
+            cam.width, cam.height
+        )));
+    }
+    Ok(())
+}
+
+/// The buffers of the first recording, for `n` splats.
+struct Binned {
+    n: u32,
+    /// The binning kernels' uniforms.
+    bin_u: wgpu::Buffer,
+    projected: wgpu::Buffer,
+    depth_keys: wgpu::Buffer,
+    order: wgpu::Buffer,
+    counts: wgpu::Buffer,
+    /// Exclusive scan of the tile counts; its last entry is the number of
+    /// intersections.
+    offsets: wgpu::Buffer,
+    ranges: wgpu::Buffer,
+}
+
+impl Binned {
+    /// The emit kernel's bindings, with these tile key buffers.
+    fn emit_bindings<'b>(
+        &'b self,
+        tile_keys: &'b wgpu::Buffer,
+        tile_values: &'b wgpu::Buffer,
+    ) -> EmitBindings<'b> {
+        EmitBindings {
+            u: &self.bin_u,
+            projected: &self.projected,
+            depth_keys_out: &self.depth_keys,
+            order: &self.order,
+            counts: &self.counts,
+            offsets: &self.offsets,
+            tile_keys,
+            tile_values,
+        }
+    }
+}
+
+/// First recording: project, depth keys, depth sort, tile counts in depth
+/// order, scan.
+fn record_binning(
+    ctx: &GpuContext,
+    k: &ForwardKernels,
+    rec: &mut Recorder,
+    cam_buf: &wgpu::Buffer,
+    bin_u: wgpu::Buffer,
+    params: &ParamBuffers,
+    grid: (u32, u32),
+) -> Result<Binned, GpuError> {
+    let n = params.n;
+    let binned = Binned {
+        n,
+        bin_u,
+        projected: rec.storage("projected", n as u64 * 48),
+        depth_keys: rec.storage("depth_keys", n as u64 * 4),
+        order: rec.storage("order", n as u64 * 4),
+        counts: rec.storage("tile_counts", n as u64 * 4),
+        offsets: rec.storage("tile_offsets", (n as u64 + 1) * 4),
+        ranges: rec.storage("ranges", (grid.0 * grid.1) as u64 * 8),
+    };
+    // Placeholders for the key buffers in the first recording (not written there).
+    let dummy = rec.storage("dummy", 16);
+    k.project.dispatch(
+        ctx,
+        rec,
+        &ProjectArgs {
+            cam: cam_buf,
+            params,
+            projected: &binned.projected,
+        },
+    )?;
+    let first = binned.emit_bindings(&dummy, &dummy);
+    if n > 0 {
+        k.emit.dispatch(ctx, rec, "depth_keys", &first, n)?;
+        k.sort.dispatch(
+            ctx,
+            &k.scan,
+            rec,
+            &SortArgs {
+                keys: &binned.depth_keys,
+                values: &binned.order,
+                n,
+                bits: 32,
+            },
+        )?;
+        k.emit.dispatch(ctx, rec, "gather_counts", &first, n)?;
+    }
+    k.scan.dispatch(
+        ctx,
+        rec,
+        &ScanArgs {
+            input: &binned.counts,
+            output: &binned.offsets,
+            n,
+        },
+    )?;
+    Ok(binned)
+}
+
+/// Read the number of (tile, splat) intersections back; an error when their
+/// keys would not fit a storage binding.
+fn intersections(ctx: &GpuContext, offsets: &wgpu::Buffer, n: u32) -> Result<u32, GpuError> {
+    let total: u64 = ctx.read_at::<u32>(offsets, n as usize, 1)?[0] as u64;
+    if total * 4 > ctx.max_binding_bytes() {
+        return Err(GpuError::InvalidInput(format!(
+            "{total} tile intersections exceed the device's storage binding limit"
+        )));
+    }
+    Ok(total as u32)
+}
+
+/// The buffers of the second recording that the state keeps.
+struct Rastered {
+    tile_values: wgpu::Buffer,
+    image: wgpu::Buffer,
+    final_t: wgpu::Buffer,
+    last_contrib: wgpu::Buffer,
+}
+
+/// Second recording: emit the `total` (tile, splat) keys, stable tile sort,
+/// tile ranges, rasterize.
+fn record_raster(
+    ctx: &GpuContext,
+    k: &ForwardKernels,
+    rec: &mut Recorder,
+    cam_buf: &wgpu::Buffer,
+    binned: &Binned,
+    cam: &RenderCamera,
+    total: u32,
+) -> Result<Rastered, GpuError> {
+    let grid = cam.tile_grid();
+    let num_tiles = grid.0 * grid.1;
+    let pixels = cam.width as u64 * cam.height as u64;
+    let tile_keys = rec.storage("tile_keys", total as u64 * 4);
+    let out = Rastered {
+        tile_values: rec.storage("tile_values", total as u64 * 4),
+        image: rec.storage("image", pixels * 12),
+        final_t: rec.storage("final_t", pixels * 4),
+        last_contrib: rec.storage("last_contrib", pixels * 4),
+    };
+    if total > 0 {
+        let second = binned.emit_bindings(&tile_keys, &out.tile_values);
+        k.emit.dispatch(ctx, rec, "emit", &second, binned.n)?;
+        let bits = bits_for(num_tiles.saturating_sub(1));
+        k.sort.dispatch(
+            ctx,
+            &k.scan,
+            rec,
+            &SortArgs {
+                keys: &tile_keys,
+                values: &out.tile_values,
+                n: total,
+                bits,
+            },
+        )?;
+    }
+    k.ranges.dispatch(
+        ctx,
+        rec,
+        &RangeArgs {
+            tile_keys: &tile_keys,
+            ranges: &binned.ranges,
+            n: total,
+            num_tiles,
+        },
+    )?;
+    k.rasterize.dispatch(
+        ctx,
+        rec,
+        &RasterBindings {
+            cam: cam_buf,
+            projected: &binned.projected,
+            tile_values: &out.tile_values,
+            ranges: &binned.ranges,
+            image: &out.image,
+            final_t: &out.final_t,
+            last_contrib: &out.last_contrib,
+        },
+        grid,
+    )?;
+    Ok(out)
 }
 
 impl ForwardState {

@@ -10,7 +10,7 @@
 //! the antialiasing compensation, the quaternion normalisation and the view
 //! direction of the SH. Culled splats get zero gradients.
 
-use super::project::{CamT, project_one};
+use super::project::{CamT, Inter, ProjectedT, project_one};
 use super::rasterize_backward::ProjGradT;
 use super::real::Real;
 use super::sh;
@@ -45,16 +45,41 @@ fn backward_one<T: Real>(
     v: &ProjGradT<T>,
     v_sh: &mut [T],
 ) -> One<T> {
-    let z0 = T::default();
     let mut o = One::<T>::default();
     let Some((p, it)) = project_one(splats, i, cam, opts) else {
         return o;
     };
+    o.mean = colour_backward(splats, i, opts, &it, v.color, v_sh);
+    // Opacity.
+    let s = it.sigmoid;
+    o.logit = v.opacity * it.comp * s * (T::c(1.0) - s);
+    let v2 = cov2d_backward(&p, &it, opts, v.conic, v.opacity * s);
+    let (v3, v_j) = projection_cov_backward(cam, &it, &v2);
+    let v_mean = mean_backward(cam, &it, v.mean2d, &v_j);
+    for a in 0..3 {
+        o.mean[a] += v_mean[a];
+    }
+    let v_r;
+    (v_r, o.log_scale) = cov3d_backward(&it, &v3);
+    o.rot = rotation_backward(&it, &v_r);
+    o
+}
+
+/// Colour → SH coefficients (into `v_sh`) and view direction; returns the
+/// direction's gradient on the mean. A channel clamped at 0 passes none.
+fn colour_backward<T: Real>(
+    splats: &Splats,
+    i: usize,
+    opts: &RenderOptions,
+    it: &Inter<T>,
+    v_color: [T; 3],
+    v_sh: &mut [T],
+) -> [T; 3] {
+    let z0 = T::default();
     let k_stored = splats.coeffs_per_channel();
     let sh_block = &splats.sh[i * k_stored * 3..(i + 1) * k_stored * 3];
     let deg = opts.sh_degree.min(splats.sh_degree);
-    // Colour → SH and view direction.
-    let mut vc = v.color;
+    let mut vc = v_color;
     for ch in 0..3 {
         if it.color_clamped[ch] {
             vc[ch] = z0;
@@ -72,22 +97,32 @@ fn backward_one<T: Real>(
             }
         }
     }
+    let mut v_mean = [z0; 3];
     if it.dist > z0 {
         let dd = it.dir[0] * v_dir[0] + it.dir[1] * v_dir[1] + it.dir[2] * v_dir[2];
         for a in 0..3 {
-            o.mean[a] += (v_dir[a] - it.dir[a] * dd) / it.dist;
+            v_mean[a] = (v_dir[a] - it.dir[a] * dd) / it.dist;
         }
     }
-    // Opacity.
-    let s = it.sigmoid;
-    o.logit = v.opacity * it.comp * s * (T::c(1.0) - s);
-    let v_comp = v.opacity * s;
-    // Conic → dilated covariance: dL/dΣ' = −C G C, G = [[va, vb/2], [vb/2, vc]].
+    v_mean
+}
+
+/// Conic → dilated 2D covariance, dL/dΣ' = −C G C with G = [[va, vb/2],
+/// [vb/2, vc]], plus the antialiasing compensation comp = sqrt(det0 / det')
+/// (whose gradient is `v_comp`): dL/dΣ2.
+fn cov2d_backward<T: Real>(
+    p: &ProjectedT<T>,
+    it: &Inter<T>,
+    opts: &RenderOptions,
+    v_conic: [T; 3],
+    v_comp: T,
+) -> [[T; 2]; 2] {
+    let z0 = T::default();
     let c = [[p.conic[0], p.conic[1]], [p.conic[1], p.conic[2]]];
     let half = T::c(0.5);
     let g = [
-        [v.conic[0], half * v.conic[1]],
-        [half * v.conic[1], v.conic[2]],
+        [v_conic[0], half * v_conic[1]],
+        [half * v_conic[1], v_conic[2]],
     ];
     let mut cg = [[z0; 2]; 2];
     let mut v2 = [[z0; 2]; 2];
@@ -101,7 +136,6 @@ fn backward_one<T: Real>(
             v2[a][b] = -(cg[a][0] * c[0][b] + cg[a][1] * c[1][b]);
         }
     }
-    // Antialiasing compensation comp = sqrt(det0 / det').
     if opts.antialiased && it.comp > z0 {
         let [a0, b0, c0] = it.cov2d;
         let det0 = a0 * c0 - b0 * b0;
@@ -114,7 +148,16 @@ fn backward_one<T: Real>(
         v2[0][1] += off;
         v2[1][0] += off;
     }
-    // Σ2 = T Σ3 Tᵀ with T = J W.
+    v2
+}
+
+/// Σ2 = T Σ3 Tᵀ with T = J W: from dL/dΣ2 to dL/dΣ3 and dL/dJ = dL/dT Wᵀ.
+fn projection_cov_backward<T: Real>(
+    cam: &CamT<T>,
+    it: &Inter<T>,
+    v2: &[[T; 2]; 2],
+) -> (M3<T>, [[T; 3]; 2]) {
+    let z0 = T::default();
     let t = &it.jw;
     let mut t_s = [[z0; 3]; 2]; // T Σ3
     for a in 0..2 {
@@ -141,7 +184,6 @@ fn backward_one<T: Real>(
             v3[a][b] = acc;
         }
     }
-    // T = J W → dL/dJ = dL/dT Wᵀ.
     let w = &cam.rot;
     let mut v_j = [[z0; 3]; 2];
     for a in 0..2 {
@@ -149,14 +191,26 @@ fn backward_one<T: Real>(
             v_j[a][b] = v_t[a][0] * w[b][0] + v_t[a][1] * w[b][1] + v_t[a][2] * w[b][2];
         }
     }
+    (v3, v_j)
+}
+
+/// The mean's gradient through the camera-space point: from the projected
+/// centre and from the (clamped) Jacobian J.
+fn mean_backward<T: Real>(
+    cam: &CamT<T>,
+    it: &Inter<T>,
+    v_mean2d: [T; 2],
+    v_j: &[[T; 3]; 2],
+) -> [T; 3] {
+    let z0 = T::default();
     let [tx, ty, tz] = it.p_cam;
     let mut v_pc = [z0; 3];
     let (fx, fy) = (cam.fx, cam.fy);
     let tz2 = tz * tz;
     // mean2d = (fx x/z + cx, fy y/z + cy).
-    v_pc[0] += fx / tz * v.mean2d[0];
-    v_pc[1] += fy / tz * v.mean2d[1];
-    v_pc[2] += -(fx * tx * v.mean2d[0] + fy * ty * v.mean2d[1]) / tz2;
+    v_pc[0] += fx / tz * v_mean2d[0];
+    v_pc[1] += fy / tz * v_mean2d[1];
+    v_pc[2] += -(fx * tx * v_mean2d[0] + fy * ty * v_mean2d[1]) / tz2;
     // J00 = fx/z, J11 = fy/z, J02 = −fx·clamp(x/z)/z, J12 = −fy·clamp(y/z)/z.
     v_pc[2] += -(fx * v_j[0][0] + fy * v_j[1][1]) / tz2;
     let cxz = (tx / tz).max(-cam.lim[0]).min(cam.lim[0]);
@@ -173,10 +227,17 @@ fn backward_one<T: Real>(
         v_pc[1] += -fy / tz2 * v_j[1][2];
         v_pc[2] += T::c(2.0) * fy * ty / (tz2 * tz) * v_j[1][2];
     }
+    let w = &cam.rot;
+    let mut v_mean = [z0; 3];
     for a in 0..3 {
-        o.mean[a] += w[0][a] * v_pc[0] + w[1][a] * v_pc[1] + w[2][a] * v_pc[2];
+        v_mean[a] = w[0][a] * v_pc[0] + w[1][a] * v_pc[1] + w[2][a] * v_pc[2];
     }
-    // Σ3 = M Mᵀ, M = R S.
+    v_mean
+}
+
+/// Σ3 = M Mᵀ with M = R S: dL/dR and dL/d(log-scales).
+fn cov3d_backward<T: Real>(it: &Inter<T>, v3: &M3<T>) -> (M3<T>, [T; 3]) {
+    let z0 = T::default();
     let r = &it.rot;
     let mut m: M3<T> = *r;
     for row in m.iter_mut() {
@@ -193,16 +254,20 @@ fn backward_one<T: Real>(
         }
     }
     let mut v_r: M3<T> = [[z0; 3]; 3];
+    let mut v_log_scale = [z0; 3];
     for a in 0..3 {
         for j in 0..3 {
             v_r[a][j] = v_m[a][j] * it.scale[j];
-            o.log_scale[j] += v_m[a][j] * r[a][j] * it.scale[j];
+            v_log_scale[j] += v_m[a][j] * r[a][j] * it.scale[j];
         }
     }
-    // R(q̂) → q̂ → q.
+    (v_r, v_log_scale)
+}
+
+/// R(q̂) → q̂ → q (through the normalisation).
+fn rotation_backward<T: Real>(it: &Inter<T>, vr: &M3<T>) -> [T; 4] {
     let [qw, qx, qy, qz] = it.qn;
     let two = T::c(2.0);
-    let vr = &v_r;
     let vq = [
         two * (-qz * vr[0][1] + qy * vr[0][2] + qz * vr[1][0] - qx * vr[1][2] - qy * vr[2][0]
             + qx * vr[2][1]),
@@ -225,10 +290,11 @@ fn backward_one<T: Real>(
             + qy * vr[2][1]),
     ];
     let dq = qw * vq[0] + qx * vq[1] + qy * vq[2] + qz * vq[3];
+    let mut rot = [T::default(); 4];
     for a in 0..4 {
-        o.rot[a] = (vq[a] - it.qn[a] * dq) / it.qnorm;
+        rot[a] = (vq[a] - it.qn[a] * dq) / it.qnorm;
     }
-    o
+    rot
 }
 
 /// Backward in precision `T`.

@@ -110,17 +110,7 @@ impl Trainer<'_> {
             cameras: &cameras,
             low_pass: o.low_pass,
         };
-        let mut pre = ModelState {
-            stats: DensifyStats::zeros(start.splats.len()),
-            splats: start.splats,
-            adam: start.adam,
-        };
-        let prepared = strategy.prepare(&mut pre, &scene);
-        let start = Checkpoint {
-            step: start.step,
-            splats: pre.splats,
-            adam: pre.adam,
-        };
+        let (start, prepared) = prepare_start(strategy.as_mut(), start, &scene);
         self.backend.upload(&start.splats, &start.adam)?;
         let mut n_splats = start.splats.len();
         let t0 = Instant::now();
@@ -131,32 +121,17 @@ impl Trainer<'_> {
             ..Default::default()
         };
         let mut recent: Vec<(f32, f32)> = Vec::new();
-        let mut perm: Vec<usize> = Vec::new();
-        let mut perm_epoch = u64::MAX;
+        let mut order = ViewOrder::default();
         let mut last_step = start.step;
         for s in start.step..o.steps {
-            let epoch = s as u64 / nv as u64;
-            if epoch != perm_epoch {
-                perm = (0..nv).collect();
-                perm.shuffle(&mut rand_pcg::Pcg64::seed_from_u64(mix_seed(
-                    o.seed, epoch, 1,
-                )));
-                perm_epoch = epoch;
-            }
-            let view = &self.data.views[perm[s as usize % nv]];
-            let background = if o.random_background {
-                let mut r = rand_pcg::Pcg64::seed_from_u64(mix_seed(o.seed, s as u64, 2));
-                [r.random::<f32>(), r.random::<f32>(), r.random::<f32>()]
-            } else {
-                o.background
-            };
+            let view = &self.data.views[order.view(s, nv, o.seed)];
             let input = view.step_input(
                 o.learning_rates(s, self.data.extent),
                 LossConfig {
                     ssim_weight: o.ssim_weight,
                 },
                 RenderOptions {
-                    background,
+                    background: step_background(&o, s),
                     sh_degree: o.active_sh_degree(s),
                     low_pass: o.low_pass,
                     antialiased: o.antialiased,
@@ -165,22 +140,7 @@ impl Trainer<'_> {
             let st = self.backend.step(&input)?;
             let done = s + 1;
             if strategy.wants_refine(done) {
-                let (splats, adam, stats) = self.backend.download()?;
-                let mut ms = ModelState {
-                    splats,
-                    adam,
-                    stats,
-                };
-                let r: RefineReport =
-                    strategy.refine(done, &mut ms, &scene, mix_seed(o.seed, done as u64, 3));
-                rep.cloned += r.cloned;
-                rep.split += r.split;
-                rep.pruned += r.pruned;
-                rep.opacity_resets += r.opacity_reset as usize;
-                rep.relocated += r.relocated;
-                rep.added += r.added;
-                n_splats = ms.splats.len();
-                self.backend.upload(&ms.splats, &ms.adam)?;
+                n_splats = self.refine(strategy.as_mut(), done, &scene, &mut rep)?;
             }
             if let Some(noise) =
                 strategy.means_noise(done, input.lr.means, mix_seed(o.seed, done as u64, 4))
@@ -200,20 +160,8 @@ impl Trainer<'_> {
                 splats: n_splats,
                 steps_per_sec: ((done - start.step) as f64 / el) as f32,
             });
-            if let Some(dir) = &self.checkpoint_dir
-                && o.checkpoint_every > 0
-                && done.is_multiple_of(o.checkpoint_every)
-                && done < o.steps
-            {
-                let (splats, adam, _) = self.backend.download()?;
-                write_checkpoint(
-                    dir.join("checkpoint.bin"),
-                    &Checkpoint {
-                        step: done,
-                        splats,
-                        adam,
-                    },
-                )?;
+            if o.checkpoint_every > 0 && done.is_multiple_of(o.checkpoint_every) && done < o.steps {
+                self.write_checkpoint(done)?;
             }
             last_step = done;
             if o.time_limit_s > 0.0 && t0.elapsed().as_secs_f64() >= o.time_limit_s {
@@ -238,6 +186,115 @@ impl Trainer<'_> {
             rep.final_train_psnr = recent.iter().map(|r| r.1).sum::<f32>() / recent.len() as f32;
         }
         Ok((end, rep))
+    }
+
+    /// Refine the model after step `done` (download, strategy, upload), add
+    /// what it did to `rep`; returns the new splat count.
+    fn refine(
+        &mut self,
+        strategy: &mut dyn Strategy,
+        done: u32,
+        scene: &SceneInfo,
+        rep: &mut TrainReport,
+    ) -> Result<usize> {
+        let (splats, adam, stats) = self.backend.download()?;
+        let mut ms = ModelState {
+            splats,
+            adam,
+            stats,
+        };
+        let r: RefineReport = strategy.refine(
+            done,
+            &mut ms,
+            scene,
+            mix_seed(self.opts.seed, done as u64, 3),
+        );
+        rep.cloned += r.cloned;
+        rep.split += r.split;
+        rep.pruned += r.pruned;
+        rep.opacity_resets += r.opacity_reset as usize;
+        rep.relocated += r.relocated;
+        rep.added += r.added;
+        self.backend.upload(&ms.splats, &ms.adam)?;
+        Ok(ms.splats.len())
+    }
+
+    /// Write `checkpoint.bin` at step `done` (when there is a checkpoint folder).
+    fn write_checkpoint(&mut self, done: u32) -> Result<()> {
+        if let Some(dir) = &self.checkpoint_dir {
+            let (splats, adam, _) = self.backend.download()?;
+            write_checkpoint(
+                dir.join("checkpoint.bin"),
+                &Checkpoint {
+                    step: done,
+                    splats,
+                    adam,
+                },
+            )?;
+        }
+        Ok(())
+    }
+}
+
+/// The strategy's one edit before the first step, applied to `start`.
+fn prepare_start(
+    strategy: &mut dyn Strategy,
+    start: Checkpoint,
+    scene: &SceneInfo,
+) -> (Checkpoint, RefineReport) {
+    let mut pre = ModelState {
+        stats: DensifyStats::zeros(start.splats.len()),
+        splats: start.splats,
+        adam: start.adam,
+    };
+    let prepared = strategy.prepare(&mut pre, scene);
+    let start = Checkpoint {
+        step: start.step,
+        splats: pre.splats,
+        adam: pre.adam,
+    };
+    (start, prepared)
+}
+
+/// The order training visits the views in: a seeded permutation per epoch.
+struct ViewOrder {
+    perm: Vec<usize>,
+    epoch: u64,
+}
+
+impl Default for ViewOrder {
+    fn default() -> Self {
+        ViewOrder {
+            perm: Vec::new(),
+            epoch: u64::MAX,
+        }
+    }
+}
+
+impl ViewOrder {
+    /// The view of (0-based) step `s` among `nv`.
+    fn view(&mut self, s: u32, nv: usize, seed: u64) -> usize {
+        let epoch = s as u64 / nv as u64;
+        if epoch != self.epoch {
+            self.perm = (0..nv).collect();
+            self.perm
+                .shuffle(&mut rand_pcg::Pcg64::seed_from_u64(mix_seed(
+                    seed, epoch, 1,
+                )));
+            self.epoch = epoch;
+        }
+        self.perm[s as usize % nv]
+    }
+}
+
+/// The background of (0-based) step `s`: uniformly random per step with
+/// `random_background`, else the fixed one.
+fn step_background(o: &TrainOptions, s: u32) -> [f32; 3] {
+    if o.random_background {
+        let mut r = rand_pcg::Pcg64::seed_from_u64(mix_seed(o.seed, s as u64, 2));
+        [r.random::<f32>(), r.random::<f32>(), r.random::<f32>()]
+    } else {
+        o.background
     }
 }
 
