@@ -183,6 +183,8 @@ pub struct Input {
     /// Models trained at the planned resolution and steps: 2 with the
     /// unmasked baseline, else 1.
     pub trainings: usize,
+    /// The RoMo mask stage runs (false under `--no-masks`).
+    pub masks: bool,
 }
 
 /// Values the user set; `None` = plan it.
@@ -210,6 +212,9 @@ pub struct Plan {
     /// Models trained with those steps (2: masked and the unmasked baseline).
     #[serde(default = "one")]
     pub trainings: usize,
+    /// The RoMo mask stage runs.
+    #[serde(default = "yes")]
+    pub masks: bool,
     /// Estimated seconds per stage: mask, pose, train (all models), finish.
     pub mask_s: f64,
     pub pose_s: f64,
@@ -240,7 +245,11 @@ impl Plan {
         let m = |s: f64| format!("≈ {:.1} min", s / 60.0);
         let posed = self.frames.div_ceil(self.pose_stride);
         vec![
-            format!("masks: {} frames, {}", self.frames, m(self.mask_s)),
+            if self.masks {
+                format!("masks: {} frames, {}", self.frames, m(self.mask_s))
+            } else {
+                "masks: none (--no-masks)".into()
+            },
             format!(
                 "COLMAP: {posed} frames (stride {}), SIFT ≤ {} px, {} features, {}",
                 self.pose_stride,
@@ -306,10 +315,11 @@ fn scaled(v: u32, d: u32) -> u32 {
 
 /// Plan for `input` within `budget_s` seconds. Pure.
 pub fn plan(input: &Input, rates: &Rates, budget_s: f64, fixed: &Fixed) -> Plan {
-    let mask_s = input.frames as f64
-        * f64::from(input.width)
-        * f64::from(input.height)
-        * rates.mask_s_per_px;
+    let mask_s = if input.masks {
+        input.frames as f64 * f64::from(input.width) * f64::from(input.height) * rates.mask_s_per_px
+    } else {
+        0.0
+    };
     // COLMAP.
     let long = input.width.max(input.height);
     let pose_budget = POSE_SHARE * budget_s;
@@ -401,6 +411,7 @@ pub fn plan(input: &Input, rates: &Rates, budget_s: f64, fixed: &Fixed) -> Plan 
         train_height: th,
         steps,
         trainings,
+        masks: input.masks,
         mask_s,
         pose_s,
         train_s: (steps * trainings) as f64 * train_step(rates, tw, th),
@@ -531,6 +542,7 @@ mod tests {
             height: 480,
             overlap: 10,
             trainings: 2,
+            masks: true,
         }
     }
 
@@ -580,6 +592,29 @@ mod tests {
         assert!((b.train_s - 2.0 * a.train_s).abs() < 1e-6);
         assert!(both.lines()[2].contains("each, masked and an unmasked baseline"));
         assert!(!alone.lines()[2].contains("baseline"));
+    }
+
+    #[test]
+    fn no_masks_plans_no_mask_time() {
+        let bare = Input {
+            masks: false,
+            trainings: 1,
+            ..video()
+        };
+        let masked = Input {
+            trainings: 1,
+            ..video()
+        };
+        let (p, q) = (
+            plan(&bare, &rates(), 1200.0, &Fixed::default()),
+            plan(&masked, &rates(), 1200.0, &Fixed::default()),
+        );
+        assert_eq!(p.mask_s, 0.0);
+        assert!(q.mask_s > 0.0);
+        assert_eq!(p.lines()[0], "masks: none (--no-masks)");
+        // The time the masks would take is free for training.
+        assert!(p.train_s >= q.train_s, "{p:?} {q:?}");
+        assert!(p.total_s() <= 1200.0);
     }
 
     #[test]

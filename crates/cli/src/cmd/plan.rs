@@ -84,6 +84,7 @@ pub fn run(args: &Args, ctx: &Ctx) -> anyhow::Result<serde_json::Value> {
         height: h,
         overlap: colmap.overlap,
         trainings: if args.no_baseline { 1 } else { 2 },
+        masks: true,
     };
     let p = plan_for(&input, args.budget_minutes, &fixed, args.backend, ctx)?;
     ctx.info(format!("plan for {frames} frames of {w}×{h}:"));

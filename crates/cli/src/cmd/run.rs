@@ -673,6 +673,7 @@ fn budget(args: &Args, ctx: &Ctx) -> Result<Budget> {
             .pose_overlap
             .unwrap_or(pose::ColmapOptions::default().overlap),
         trainings: trainings(args),
+        masks: !args.no_masks,
     };
     let fixed = crate::plan::Fixed {
         steps: args.steps.map(|s| s as usize),
