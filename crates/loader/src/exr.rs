@@ -85,12 +85,7 @@ const MAX_EXPANSION: u64 = 1100;
 /// by what a header claims. Checked per layer: the pixel data, the largest
 /// block (a tile or a group of scan lines, which the decoder allocates whole
 /// for every chunk it reads) and the chunk count (8 bytes of offset each).
-fn check_claimed_size(path: &Path) -> Result<()> {
-    let file_len = std::fs::metadata(path)
-        .map_err(|e| LoaderError::io(path, e))?
-        .len();
-    let meta = exr::meta::MetaData::read_from_file(path, false)
-        .map_err(|e| LoaderError::format(path, format!("EXR decode: {e}")))?;
+fn check_claimed_size(path: &Path, meta: &exr::meta::MetaData, file_len: u64) -> Result<()> {
     let budget = file_len.saturating_mul(MAX_EXPANSION);
     for (i, header) in meta.headers.iter().enumerate() {
         let bytes_per_pixel: u64 = header
@@ -156,12 +151,14 @@ pub fn read_exr(path: impl AsRef<Path>) -> Result<FloatImage> {
             context: String::new(),
         });
     }
-    check_claimed_size(path)?;
     let bad = |what: String| LoaderError::format(path, what);
     let decode = |e: exr::error::Error| bad(format!("EXR decode: {e}"));
     let file = std::fs::File::open(path).map_err(|e| LoaderError::io(path, e))?;
+    let file_len = file.metadata().map_err(|e| LoaderError::io(path, e))?.len();
+    // Reads the headers only; the offset tables and chunks come after the check.
     let reader = exr::block::read(std::io::BufReader::new(file), false).map_err(decode)?;
     let meta = reader.meta_data().clone();
+    check_claimed_size(path, &meta, file_len)?;
     let header = meta
         .headers
         .first()

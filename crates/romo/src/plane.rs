@@ -53,10 +53,10 @@ impl Plane {
         self.data[y * self.w + x]
     }
 
-    /// Bilinear sample at continuous pixel coordinates (pixel centres at
-    /// integers), clamped to the border.
+    /// The four taps and weights of a bilinear sample at (x, y), clamped to
+    /// the border: row offsets `r0`, `r1`, columns `x0`, `x1`, fractions.
     #[inline]
-    pub fn bilinear(&self, x: f32, y: f32) -> f32 {
+    fn bilinear_taps(&self, x: f32, y: f32) -> (usize, usize, usize, usize, f32, f32) {
         let xm = (self.w - 1) as f32;
         let ym = (self.h - 1) as f32;
         let x = x.clamp(0.0, xm);
@@ -69,8 +69,14 @@ impl Plane {
         let y0 = y0 as usize;
         let x1 = (x0 + 1).min(self.w - 1);
         let y1 = (y0 + 1).min(self.h - 1);
-        let r0 = y0 * self.w;
-        let r1 = y1 * self.w;
+        (y0 * self.w, y1 * self.w, x0, x1, fx, fy)
+    }
+
+    /// Bilinear sample at continuous pixel coordinates (pixel centres at
+    /// integers), clamped to the border.
+    #[inline]
+    pub fn bilinear(&self, x: f32, y: f32) -> f32 {
+        let (r0, r1, x0, x1, fx, fy) = self.bilinear_taps(x, y);
         let a = self.data[r0 + x0] + fx * (self.data[r0 + x1] - self.data[r0 + x0]);
         let b = self.data[r1 + x0] + fx * (self.data[r1 + x1] - self.data[r1 + x0]);
         a + fy * (b - a)
@@ -80,21 +86,7 @@ impl Plane {
     /// (each exactly [`Plane::bilinear`]'s value).
     #[inline]
     pub fn bilinear4(planes: [&Plane; 4], x: f32, y: f32) -> [f32; 4] {
-        let p = planes[0];
-        let xm = (p.w - 1) as f32;
-        let ym = (p.h - 1) as f32;
-        let x = x.clamp(0.0, xm);
-        let y = y.clamp(0.0, ym);
-        let x0 = x.floor();
-        let y0 = y.floor();
-        let fx = x - x0;
-        let fy = y - y0;
-        let x0 = x0 as usize;
-        let y0 = y0 as usize;
-        let x1 = (x0 + 1).min(p.w - 1);
-        let y1 = (y0 + 1).min(p.h - 1);
-        let r0 = y0 * p.w;
-        let r1 = y1 * p.w;
+        let (r0, r1, x0, x1, fx, fy) = planes[0].bilinear_taps(x, y);
         planes.map(|q| {
             let d = &q.data;
             let a = d[r0 + x0] + fx * (d[r0 + x1] - d[r0 + x0]);
