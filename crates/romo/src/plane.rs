@@ -309,6 +309,33 @@ mod tests {
     use super::*;
 
     #[test]
+    fn bilinear4_equals_bilinear_per_plane() {
+        let planes: Vec<Plane> = (0..4)
+            .map(|k| Plane::from_fn(7, 5, move |x, y| ((x * 31 + y * 17 + k * 7) % 13) as f32))
+            .collect();
+        let refs = [&planes[0], &planes[1], &planes[2], &planes[3]];
+        for (x, y) in [
+            (0.0, 0.0),
+            (2.3, 1.7),
+            (6.0, 4.0),
+            (-1.5, 9.0),
+            (5.99, 0.01),
+        ] {
+            let four = Plane::bilinear4(refs, x, y);
+            for (k, p) in planes.iter().enumerate() {
+                assert_eq!(
+                    four[k].to_bits(),
+                    p.bilinear(x, y).to_bits(),
+                    "({x}, {y}) plane {k}"
+                );
+            }
+        }
+        // Known answer: halfway between 0 and 10 in x.
+        let ramp = Plane::from_fn(2, 1, |x, _| 10.0 * x as f32);
+        assert_eq!(ramp.bilinear(0.5, 0.0), 5.0);
+    }
+
+    #[test]
     fn bilinear_is_exact_on_a_linear_ramp() {
         let p = Plane::from_fn(10, 8, |x, y| 2.0 * x as f32 + 3.0 * y as f32);
         assert!((p.bilinear(3.25, 4.5) - (6.5 + 13.5)).abs() < 1e-5);
