@@ -77,7 +77,16 @@ fn one_line(err: &anyhow::Error) -> String {
 
 #[cfg(test)]
 mod tests {
-    use super::one_line;
+    use super::{Cli, one_line};
+    use clap::CommandFactory;
+
+    /// clap's own consistency checks over every subcommand: no two flags
+    /// share a name or short form, defaults parse with their value parsers,
+    /// `requires` / `conflicts_with` name existing arguments.
+    #[test]
+    fn command_line_definition_is_consistent() {
+        Cli::command().debug_assert();
+    }
 
     #[test]
     fn causes_are_printed_once_on_one_line() {
