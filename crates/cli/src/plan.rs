@@ -6,8 +6,10 @@
 //! fits the budget. Estimates come from [`Rates`]: the training step time is
 //! probed on this machine's adapter ([`probe_step_seconds`], a few steps on
 //! synthetic splats at two resolutions, fitted as `a + b · pixels`); the mask
-//! and COLMAP costs are per-pixel / per-feature rates measured on this
-//! 2-core machine ([`Rates::measured`]).
+//! and COLMAP costs are per-pixel / per-feature rates measured on the 2-core
+//! development machine, scaled by how much slower or faster this machine's
+//! CPU runs the mask stage's optical flow ([`probe_cpu_factor`],
+//! [`Rates::measured`]).
 //!
 //! Order of choices:
 //! 1. masks: every frame, full resolution (RoMo needs consecutive frames);
@@ -56,23 +58,28 @@ pub struct Rates {
     /// Evaluation, export and report, seconds per training-image pixel
     /// (renders of the held-out views) plus a fixed part.
     pub finish_s: f64,
+    /// This CPU's time for the flow probe over the development machine's
+    /// (1 = as fast; the mask and COLMAP rates above include it).
+    pub cpu_factor: f64,
 }
 
 impl Rates {
     /// Mask and COLMAP rates measured on the 2-core development machine
     /// (README "run" section: 65 frames of 854×480; `romosplat mask` 0.17 s a
     /// frame, COLMAP 3.8 SIFT 2.2 s a 854×480 frame, sequential matching with
-    /// overlap 10 at 4096 features 0.6 s a pair), with the training terms
-    /// given by a probe.
-    pub fn measured(train_step_s: f64, train_s_per_px: f64) -> Self {
+    /// overlap 10 at 4096 features 0.6 s a pair), times `cpu_factor` (this
+    /// CPU's [`probe_cpu_factor`]), with the training terms given by a probe
+    /// of the adapter.
+    pub fn measured(train_step_s: f64, train_s_per_px: f64, cpu_factor: f64) -> Self {
         Rates {
             train_step_s,
             train_s_per_px,
-            mask_s_per_px: 0.17 / (854.0 * 480.0),
-            sift_s_per_px: 2.2 / (854.0 * 480.0),
-            match_s_per_pair_feature: 0.6 / 4096.0,
-            mapper_s_per_image_kfeature: 0.5,
+            mask_s_per_px: cpu_factor * 0.17 / (854.0 * 480.0),
+            sift_s_per_px: cpu_factor * 2.2 / (854.0 * 480.0),
+            match_s_per_pair_feature: cpu_factor * 0.6 / 4096.0,
+            mapper_s_per_image_kfeature: cpu_factor * 0.5,
             finish_s: 30.0,
+            cpu_factor,
         }
     }
 }
@@ -224,6 +231,13 @@ pub struct Plan {
     /// training rate was not probed (`train_s` is then 0).
     #[serde(default = "yes")]
     pub train_estimated: bool,
+    /// [`Rates::cpu_factor`] of the rates the plan was made with.
+    #[serde(default = "one_f64")]
+    pub cpu_factor: f64,
+}
+
+fn one_f64() -> f64 {
+    1.0
 }
 
 fn yes() -> bool {
@@ -273,6 +287,10 @@ impl Plan {
                 } else {
                     "set by --steps and --downscale (not estimated)".into()
                 }
+            ),
+            format!(
+                "CPU: the flow probe ran at {:.2}× the development machine's time (mask and COLMAP estimates scaled)",
+                self.cpu_factor
             ),
             format!(
                 "total {} of the {:.0}-minute budget{}",
@@ -417,6 +435,7 @@ pub fn plan(input: &Input, rates: &Rates, budget_s: f64, fixed: &Fixed) -> Plan 
         train_s: (steps * trainings) as f64 * train_step(rates, tw, th),
         finish_s,
         train_estimated: true,
+        cpu_factor: rates.cpu_factor,
     }
 }
 
@@ -530,6 +549,51 @@ pub fn probe_train_rates(
     Ok((a, b))
 }
 
+/// Size of the CPU probe's frames: the mask stage's flow resolution for
+/// 16:9 video (its 256-px grid at flow scale 2).
+const CPU_PROBE_SIZE: (usize, usize) = (512, 288);
+/// Median seconds of [`cpu_probe_once`] on the 2-core development machine,
+/// the one the mask and COLMAP rates of [`Rates::measured`] were measured on.
+pub const CPU_PROBE_REFERENCE_S: f64 = 0.21;
+
+/// One forward and one backward DIS flow (the mask stage's preset) between
+/// two synthetic textured frames a few pixels apart, seconds.
+fn cpu_probe_once(a: &romo::plane::Plane, b: &romo::plane::Plane) -> anyhow::Result<f64> {
+    let dis = romo::flow::dis::Dis::new(romo::flow::dis::DisOptions::masks());
+    let t = std::time::Instant::now();
+    dis.compute(a, b)?;
+    dis.compute(b, a)?;
+    Ok(t.elapsed().as_secs_f64())
+}
+
+/// A smooth, non-repeating texture (sum of sines at unrelated frequencies)
+/// shifted by (`dx`, `dy`) pixels.
+fn probe_frame(dx: f32, dy: f32) -> romo::plane::Plane {
+    let (w, h) = CPU_PROBE_SIZE;
+    romo::plane::Plane::from_fn(w, h, |x, y| {
+        let (x, y) = (x as f32 - dx, y as f32 - dy);
+        0.5 + 0.2 * (0.11 * x + 0.07 * y).sin()
+            + 0.15 * (0.23 * x - 0.17 * y + 1.0).sin()
+            + 0.1 * (0.051 * x * 0.9 + 0.37 * y).sin() * (0.029 * y).cos()
+    })
+}
+
+/// How long this CPU takes for the mask stage's optical flow on a fixed
+/// synthetic pair, over the development machine's time
+/// ([`CPU_PROBE_REFERENCE_S`]): the median of 3 timed runs after one
+/// warm-up, clamped to [0.1, 20]. The mask stage and COLMAP are CPU-bound,
+/// so their measured rates scale with it. Takes about a second here.
+pub fn probe_cpu_factor() -> anyhow::Result<f64> {
+    let (a, b) = (probe_frame(0.0, 0.0), probe_frame(2.5, 1.5));
+    cpu_probe_once(&a, &b)?;
+    let mut t = [0.0; 3];
+    for v in &mut t {
+        *v = cpu_probe_once(&a, &b)?;
+    }
+    t.sort_by(f64::total_cmp);
+    Ok((t[1] / CPU_PROBE_REFERENCE_S).clamp(0.1, 20.0))
+}
+
 #[cfg(test)]
 mod tests {
     #![allow(clippy::unwrap_used, clippy::expect_used)]
@@ -548,7 +612,7 @@ mod tests {
 
     /// 0.05 s a step plus 0.5 µs a pixel: 240×135 → 0.066 s a step.
     fn rates() -> Rates {
-        Rates::measured(0.05, 0.5e-6)
+        Rates::measured(0.05, 0.5e-6, 1.0)
     }
 
     #[test]
@@ -631,7 +695,7 @@ mod tests {
         let fast = plan(&video(), &rates(), 1200.0, &Fixed::default());
         let slow = plan(
             &video(),
-            &Rates::measured(0.2, 4e-6),
+            &Rates::measured(0.2, 4e-6, 1.0),
             1200.0,
             &Fixed::default(),
         );
@@ -673,10 +737,65 @@ mod tests {
         );
         assert!(over.total_s() > 60.0);
         assert!(
-            over.lines()[3].contains("over budget"),
+            over.lines()[4].contains("over budget"),
             "{:?}",
             over.lines()
         );
+    }
+
+    #[test]
+    fn a_slower_cpu_scales_the_mask_and_colmap_estimates() {
+        let f = Fixed {
+            steps: Some(500),
+            downscale: Some(4),
+            pose_stride: Some(1),
+            pose_features: Some(1024),
+            pose_max_image_size: Some(640),
+        };
+        let here = plan(&video(), &rates(), 1200.0, &f);
+        let slow = plan(&video(), &Rates::measured(0.05, 0.5e-6, 3.0), 1200.0, &f);
+        assert!((slow.mask_s / here.mask_s - 3.0).abs() < 1e-9);
+        assert!((slow.pose_s / here.pose_s - 3.0).abs() < 1e-9);
+        assert_eq!(slow.train_s, here.train_s);
+        assert!(slow.lines()[3].contains("3.00×"), "{:?}", slow.lines());
+        // A slow CPU makes the planner cheapen COLMAP to stay in budget.
+        let auto_here = plan(&video(), &rates(), 900.0, &Fixed::default());
+        let auto_slow = plan(
+            &video(),
+            &Rates::measured(0.05, 0.5e-6, 3.0),
+            900.0,
+            &Fixed::default(),
+        );
+        assert!(
+            auto_slow.pose_max_image_size < auto_here.pose_max_image_size
+                || auto_slow.pose_stride > auto_here.pose_stride,
+            "{auto_here:?} {auto_slow:?}"
+        );
+    }
+
+    #[test]
+    fn the_cpu_probe_times_a_flow_that_recovers_its_shift() {
+        let (a, b) = (probe_frame(0.0, 0.0), probe_frame(2.5, 1.5));
+        let dis = romo::flow::dis::Dis::new(romo::flow::dis::DisOptions::masks());
+        let f = dis.compute(&a, &b).unwrap();
+        // Median flow over the interior (borders see texture enter / leave).
+        let (mut u, mut v) = (Vec::new(), Vec::new());
+        for y in 20..f.h() - 20 {
+            for x in 20..f.w() - 20 {
+                let (fu, fv) = f.sample(x as f32, y as f32);
+                u.push(fu);
+                v.push(fv);
+            }
+        }
+        u.sort_by(f32::total_cmp);
+        v.sort_by(f32::total_cmp);
+        let (mu, mv) = (u[u.len() / 2], v[v.len() / 2]);
+        assert!(
+            (mu - 2.5).abs() < 0.1 && (mv - 1.5).abs() < 0.1,
+            "{mu} {mv}"
+        );
+        let k = probe_cpu_factor().unwrap();
+        assert!(k.is_finite() && (0.1..=20.0).contains(&k), "{k}");
     }
 
     #[test]

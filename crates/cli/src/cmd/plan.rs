@@ -53,7 +53,7 @@ pub fn plan_for(
     if fixed.steps.is_some() && fixed.downscale.is_some() {
         let mut p = plan(
             input,
-            &Rates::measured(0.0, 0.0),
+            &Rates::measured(0.0, 0.0, crate::plan::probe_cpu_factor()?),
             budget_minutes * 60.0,
             fixed,
         );
@@ -62,7 +62,7 @@ pub fn plan_for(
     }
     let mut b = make_backend(backend, ctx)?;
     let (a, per_px) = probe_train_rates(b.as_mut(), input.width, input.height, PROBE_SPLATS)?;
-    let rates = Rates::measured(a, per_px);
+    let rates = Rates::measured(a, per_px, crate::plan::probe_cpu_factor()?);
     Ok(plan(input, &rates, budget_minutes * 60.0, fixed))
 }
 
