@@ -69,12 +69,59 @@ fn tile_rect(p: ProjectedSplat, grid: vec2<u32>) -> vec4<u32> {
     return vec4<u32>(vec2<u32>(mn), vec2<u32>(mx));
 }
 
+// k² = min(9, 2 ln(255 o)): the squared Mahalanobis radius within which a
+// splat of opacity `o` reaches α ≥ 1/255 (3σ cap, as the tile extents);
+// −1 (no tile) when 255·o ≤ 1. Mirrors `reference::rasterize::tile_k2`.
+fn tile_k2(o: f32) -> f32 {
+    let th = 255.0 * o;
+    if (!(th > 1.0)) {
+        return -1.0;
+    }
+    return min(2.0 * log(th), 9.0);
+}
+
+// Whether splat `p` reaches Mahalanobis distance² ≤ `k2` at some pixel
+// centre of tile `t`: the exact minimum of the quadratic over the tile's
+// pixel-centre rectangle, taken on the edges that face the mean (0 when the
+// mean is inside). Mirrors `reference::rasterize::tile_hit` operation for
+// operation.
+fn tile_hit(p: ProjectedSplat, k2: f32, t: vec2<u32>) -> bool {
+    let ts = f32(TILE_SIZE);
+    let lo = vec2<f32>(f32(t.x) * ts + 0.5, f32(t.y) * ts + 0.5);
+    let hi = vec2<f32>(lo.x + (ts - 1.0), lo.y + (ts - 1.0));
+    let a = p.conic_a;
+    let b = p.conic_b;
+    let c = p.conic_c;
+    let mean = vec2<f32>(p.mean_x, p.mean_y);
+    let near = vec2<f32>(clamp(mean.x, lo.x, hi.x), clamp(mean.y, lo.y, hi.y));
+    if (near.x == mean.x && near.y == mean.y) {
+        return k2 >= 0.0;
+    }
+    var best = 3.4028235e38;
+    if (near.x != mean.x) {
+        let dx = near.x - mean.x;
+        let dy = clamp(-b * dx / c, lo.y - mean.y, hi.y - mean.y);
+        best = min(best, a * dx * dx + 2.0 * b * dx * dy + c * dy * dy);
+    }
+    if (near.y != mean.y) {
+        let dy = near.y - mean.y;
+        let dx = clamp(-b * dy / a, lo.x - mean.x, hi.x - mean.x);
+        best = min(best, a * dx * dx + 2.0 * b * dx * dy + c * dy * dy);
+    }
+    return best <= k2;
+}
+
+// Tiles of `tile_rect` that `tile_hit` keeps.
 fn tile_count(p: ProjectedSplat, grid: vec2<u32>) -> u32 {
     let r = tile_rect(p, grid);
-    if (r.z <= r.x || r.w <= r.y) {
-        return 0u;
+    let k2 = tile_k2(p.opacity);
+    var n = 0u;
+    for (var ty = r.y; ty < r.w; ty++) {
+        for (var tx = r.x; tx < r.z; tx++) {
+            n += u32(tile_hit(p, k2, vec2<u32>(tx, ty)));
+        }
     }
-    return (r.z - r.x) * (r.w - r.y);
+    return n;
 }
 
 // ---------------------------------------------------------------------------

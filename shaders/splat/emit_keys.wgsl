@@ -1,8 +1,8 @@
 // emit_keys.wgsl — tile binning. `depth_keys` makes (depth, splat) pairs for
 // the depth sort; `gather_counts` lists tile counts in depth order for the
 // scan; `emit` writes one (tile id, splat) pair per touched tile at the
-// scanned offset. Counts and emission both use `tile_rect` from common.wgsl,
-// so they can never disagree.
+// scanned offset. Counts and emission both use `tile_rect` and `tile_hit`
+// from common.wgsl, so they can never disagree.
 
 struct BinUniforms {
     n: u32,
@@ -48,13 +48,17 @@ fn emit(@builtin(workgroup_id) wid: vec3<u32>, @builtin(num_workgroups) nwg: vec
         return;
     }
     let s = order[i];
-    let r = tile_rect(projected[s], vec2<u32>(u.grid_x, u.grid_y));
+    let p = projected[s];
+    let r = tile_rect(p, vec2<u32>(u.grid_x, u.grid_y));
+    let k2 = tile_k2(p.opacity);
     var off = offsets[i];
     for (var ty = r.y; ty < r.w; ty++) {
         for (var tx = r.x; tx < r.z; tx++) {
-            tile_keys[off] = ty * u.grid_x + tx;
-            tile_values[off] = s;
-            off++;
+            if (tile_hit(p, k2, vec2<u32>(tx, ty))) {
+                tile_keys[off] = ty * u.grid_x + tx;
+                tile_values[off] = s;
+                off++;
+            }
         }
     }
 }

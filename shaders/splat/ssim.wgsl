@@ -38,9 +38,12 @@ const C2: f32 = 0.0009;
 var<workgroup> s_sum: array<f32, WORKGROUP_SIZE>;
 
 // Register blocking: each invocation filters SEG consecutive outputs along
-// the filter direction from one window of SEG + 10 loads (instead of 11 loads
-// per output); storage reads are per-lane, bounds-checked gathers on
-// llvmpipe and dominate otherwise. SEG is the host's `BLUR_SEGMENT`.
+// the filter direction, sliding an 11-value window held in named variables
+// (one load per output plus 10 to start; storage reads are per-lane,
+// bounds-checked gathers on llvmpipe). The window and the taps are named
+// values, not indexed private arrays: llvmpipe keeps a dynamically indexed
+// private array in per-lane scratch memory, which cost ~7× the kernel's
+// storage traffic. SEG is the host's `BLUR_SEGMENT`.
 
 fn at(base: u32, i: i32, lim: i32, stride: u32) -> f32 {
     if (i < 0 || i >= lim) {
@@ -52,22 +55,45 @@ fn at(base: u32, i: i32, lim: i32, stride: u32) -> f32 {
 // Filter SEG outputs starting at index `i0` along a line of `lim` elements
 // (element i at `base + i·stride`) and store them in `dst`.
 fn filter_seg(base: u32, i0: u32, lim: u32, stride: u32) {
-    var tp: array<f32, 11>;
-    for (var t = 0u; t < 11u; t++) {
-        tp[t] = u.taps[t / 4u][t % 4u];
-    }
-    var win: array<f32, 18>;
-    for (var t = 0u; t < 18u; t++) {
-        win[t] = at(base, i32(i0 + t) - 5, i32(lim), stride);
-    }
-    for (var o = 0u; o < SEG; o++) {
-        var acc = 0.0;
-        for (var t = 0u; t < 11u; t++) {
-            acc += tp[t] * win[o + t];
-        }
-        if (i0 + o < lim) {
-            dst[base + (i0 + o) * stride] = acc;
-        }
+    let t0 = u.taps[0].x;
+    let t1 = u.taps[0].y;
+    let t2 = u.taps[0].z;
+    let t3 = u.taps[0].w;
+    let t4 = u.taps[1].x;
+    let t5 = u.taps[1].y;
+    let t6 = u.taps[1].z;
+    let t7 = u.taps[1].w;
+    let t8 = u.taps[2].x;
+    let t9 = u.taps[2].y;
+    let t10 = u.taps[2].z;
+    let l = i32(lim);
+    let s = i32(i0) - 5;
+    var w0 = at(base, s, l, stride);
+    var w1 = at(base, s + 1, l, stride);
+    var w2 = at(base, s + 2, l, stride);
+    var w3 = at(base, s + 3, l, stride);
+    var w4 = at(base, s + 4, l, stride);
+    var w5 = at(base, s + 5, l, stride);
+    var w6 = at(base, s + 6, l, stride);
+    var w7 = at(base, s + 7, l, stride);
+    var w8 = at(base, s + 8, l, stride);
+    var w9 = at(base, s + 9, l, stride);
+    let count = min(SEG, lim - i0);
+    for (var o = 0u; o < count; o++) {
+        let w10 = at(base, s + 10 + i32(o), l, stride);
+        let acc = t0 * w0 + t1 * w1 + t2 * w2 + t3 * w3 + t4 * w4 + t5 * w5 + t6 * w6 + t7 * w7
+            + t8 * w8 + t9 * w9 + t10 * w10;
+        dst[base + (i0 + o) * stride] = acc;
+        w0 = w1;
+        w1 = w2;
+        w2 = w3;
+        w3 = w4;
+        w4 = w5;
+        w5 = w6;
+        w6 = w7;
+        w7 = w8;
+        w8 = w9;
+        w9 = w10;
     }
 }
 

@@ -1,6 +1,7 @@
 //! Benchmark: how many (tile, splat) intersections the binning produces with
-//! the old circular 3σ radius (`ceil(3·sqrt(λ_max))`) versus the current
-//! opacity-aware per-axis extents (gsplat style, `reference::project`), on
+//! the old circular 3σ radius (`ceil(3·sqrt(λ_max))`), the opacity-aware
+//! per-axis extents (gsplat style, `reference::project`) and the tiles of
+//! those rectangles that the ellipse meets (`tile_hit`, what binning uses), on
 //! the initial splats of a scene, averaged over its first 8 views.
 //! Scene: `TILE_BENCH_SCENE` (a scene folder, default `../shared/data/fox` from the repo root),
 //! `TILE_BENCH_DOWNSCALE` (default 4). Prints one JSON object.
@@ -8,7 +9,7 @@
 #![allow(clippy::unwrap_used, clippy::expect_used)]
 
 use loader::scene::{Scene, SceneOptions};
-use splat::reference::rasterize::tile_rect;
+use splat::reference::rasterize::{tile_hit, tile_k2, tile_rect};
 use splat::train::TrainOptions;
 use splat::train::data::{camera_of, initial_splats, scene_extent};
 use splat::types::RenderOptions;
@@ -31,7 +32,7 @@ fn main() {
         sh_degree: 3,
         ..Default::default()
     };
-    let (mut circle, mut tight, mut views) = (0u64, 0u64, 0u64);
+    let (mut circle, mut tight, mut ellipse, mut views) = (0u64, 0u64, 0u64, 0u64);
     // (tile, splat, 8-column half) triples, and those where the splat's α ≥ 1/255
     // box (`alpha_box` in common.wgsl, without its margins) misses the half.
     let (mut halves, mut missed) = (0u64, 0u64);
@@ -45,6 +46,12 @@ fn main() {
             let rect = tile_rect(p.mean2d, p.radius, e, grid);
             tight += area(rect);
             let Some(r) = rect else { continue };
+            let k2 = tile_k2(p.opacity);
+            for ty in r[1]..r[3] {
+                for tx in r[0]..r[2] {
+                    ellipse += tile_hit(p.mean2d, p.conic, k2, (tx, ty)) as u64;
+                }
+            }
             let [a, b, c] = p.conic.map(|v| v as f64);
             let th = 255.0 * p.opacity as f64;
             let det = a * c - b * b;
@@ -81,7 +88,9 @@ fn main() {
             "views": views,
             "intersections_circle_3sigma": circle as f64 / v,
             "intersections_tight": tight as f64 / v,
+            "intersections_ellipse": ellipse as f64 / v,
             "ratio": tight as f64 / circle.max(1) as f64,
+            "ellipse_ratio": ellipse as f64 / tight.max(1) as f64,
             "half_tile_blocks_missed_by_alpha_box": missed as f64 / halves.max(1) as f64,
         })
     );

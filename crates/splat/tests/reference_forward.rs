@@ -5,6 +5,7 @@
 
 mod common;
 
+use splat::reference::rasterize::{tile_hit, tile_k2};
 use splat::reference::{project, rasterize, render};
 use splat::{ProjectedSplat, RenderCamera, RenderOptions, Splats};
 
@@ -118,6 +119,11 @@ fn brute_force(p: &[ProjectedSplat], cam: &RenderCamera, bg: [f32; 3]) -> Vec<f3
                 let ty0 = ((s.mean2d[1] - ey) / 16.0).floor().max(0.0) as usize;
                 let ty1 = ((s.mean2d[1] + ey) / 16.0).ceil() as usize;
                 if !(tx0..tx1).contains(&(x / 16)) || !(ty0..ty1).contains(&(y / 16)) {
+                    continue;
+                }
+                // ... of those, only the tiles their 3σ-capped ellipse meets.
+                let k2 = tile_k2(s.opacity);
+                if !tile_hit(s.mean2d, s.conic, k2, ((x / 16) as u32, (y / 16) as u32)) {
                     continue;
                 }
                 let (dx, dy) = (s.mean2d[0] - px, s.mean2d[1] - py);

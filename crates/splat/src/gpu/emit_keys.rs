@@ -1,7 +1,8 @@
 //! Host for `shaders/splat/emit_keys.wgsl`: tile binning of projected splats
 //! (depth keys for the depth sort, tile counts in depth order, one
 //! `(tile id, splat index)` pair per touched 16×16 tile). The tile rectangle
-//! comes from `tile_rect` in `common.wgsl`, shared by counting and emission.
+//! comes from `tile_rect` and `tile_hit` in `common.wgsl`, shared by counting
+//! and emission.
 //! Reference: Kerbl et al., "3D Gaussian Splatting" (2023), §6 (tile binning).
 
 use super::kernel::{Recorder, groups_1d, kernel};

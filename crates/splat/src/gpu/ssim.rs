@@ -15,7 +15,7 @@ use bytemuck::{Pod, Zeroable};
 /// Invocations per workgroup (pixels per partial sum in `ssim_terms`).
 pub const WORKGROUP_SIZE: u32 = 256;
 /// Outputs per invocation of `blur_h` / `blur_v` (`SEG` in the shader).
-pub const BLUR_SEGMENT: u32 = 8;
+pub const BLUR_SEGMENT: u32 = 32;
 /// Planar maps per scratch buffer (5 statistics × 3 channels).
 pub const SCRATCH_MAPS: u64 = 15;
 

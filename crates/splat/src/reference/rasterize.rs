@@ -2,11 +2,15 @@
 //! `renderCUDA`), generic over f32/f64.
 //!
 //! Binning: a splat with radius > 0, mean m and per-axis tile extents e
-//! (opacity-aware, see `reference::project`) touches the tiles
+//! (opacity-aware, see `reference::project`) is a candidate for the tiles
 //! `[floor((m−e)/16), ceil((m+e)/16))` on each axis, clamped to the grid
-//! ([`tile_rect`], which the GPU binning kernel mirrors); extent 0 = none. Each tile's list is
-//! sorted by (depth, splat index) — what a stable radix sort on the depth
-//! bits of index-ordered keys produces.
+//! ([`tile_rect`]); extent 0 = none. Of those it touches the tiles whose
+//! pixel-centre rectangle meets its ellipse d·conic·d ≤ k², k = min(3,
+//! sqrt(2 ln(255 o))) — the ellipse whose bounding box the extents are
+//! ([`tile_k2`], [`tile_hit`]: an exact minimum over the rectangle). The GPU binning
+//! kernels mirror both in f32. Each tile's list is sorted by (depth, splat
+//! index) — what a stable radix sort on the depth bits of index-ordered keys
+//! produces.
 //!
 //! Compositing per pixel centre p = (x+0.5, y+0.5), front to back over the
 //! tile list: d = mean2d − p, power = −½(a dx² + c dy²) − b dx dy; skip when
@@ -49,43 +53,80 @@ pub fn tile_rect(
     (r[2] > r[0] && r[3] > r[1]).then_some(r)
 }
 
+/// The squared Mahalanobis radius k² = min(9, 2 ln(255 o)) within which a
+/// splat of opacity `o` reaches α ≥ 1/255 (3σ cap, as the tile extents);
+/// −1 (no tile) when 255·o ≤ 1. `tile_k2` in `common.wgsl`.
+pub fn tile_k2(o: f32) -> f32 {
+    let th = 255.0 * o;
+    if !(th > 1.0) {
+        return -1.0;
+    }
+    (2.0 * th.ln()).min(9.0)
+}
+
+/// Whether a splat with 2D mean `mean` and conic (a, b, c) reaches
+/// d·conic·d ≤ `k2` ([`tile_k2`]) at some point of tile `(tx, ty)`'s
+/// pixel-centre rectangle. Exact: when the mean lies outside the rectangle
+/// the minimum of the (convex) quadratic lies on an edge that faces the mean,
+/// and on each such edge it is the clamped 1D minimum. All f32, in the
+/// operation order of `tile_hit` in `common.wgsl`.
+pub fn tile_hit(mean: [f32; 2], conic: [f32; 3], k2: f32, tile: (u32, u32)) -> bool {
+    let ts = TILE_SIZE as f32;
+    let lo = [tile.0 as f32 * ts + 0.5, tile.1 as f32 * ts + 0.5];
+    let hi = [lo[0] + (ts - 1.0), lo[1] + (ts - 1.0)];
+    let [a, b, c] = conic;
+    let near = [mean[0].clamp(lo[0], hi[0]), mean[1].clamp(lo[1], hi[1])];
+    if near[0] == mean[0] && near[1] == mean[1] {
+        return k2 >= 0.0;
+    }
+    let q = |dx: f32, dy: f32| a * dx * dx + 2.0 * b * dx * dy + c * dy * dy;
+    let mut best = f32::MAX;
+    if near[0] != mean[0] {
+        let dx = near[0] - mean[0];
+        let dy = (-b * dx / c).clamp(lo[1] - mean[1], hi[1] - mean[1]);
+        best = best.min(q(dx, dy));
+    }
+    if near[1] != mean[1] {
+        let dy = near[1] - mean[1];
+        let dx = (-b * dy / a).clamp(lo[0] - mean[0], hi[0] - mean[0]);
+        best = best.min(q(dx, dy));
+    }
+    best <= k2
+}
+
 /// Per-tile depth-sorted lists: (`tile_ranges`, `tile_splats`).
 pub fn bin<T: Real>(proj: &[ProjectedT<T>], cam: &RenderCamera) -> (Vec<[u32; 2]>, Vec<u32>) {
     let grid = cam.tile_grid();
     let n_tiles = (grid.0 * grid.1) as usize;
-    let rects: Vec<Option<[u32; 4]>> = proj
-        .iter()
+    // Each splat's touched tiles, in row-major order.
+    let touched: Vec<Vec<u32>> = proj
+        .par_iter()
         .map(|p| {
-            tile_rect(
-                p.mean2d.map(T::to_f32),
-                p.radius.to_f32(),
-                p.extent.map(T::to_f32),
-                grid,
-            )
+            let mean = p.mean2d.map(T::to_f32);
+            let Some(r) = tile_rect(mean, p.radius.to_f32(), p.extent.map(T::to_f32), grid) else {
+                return Vec::new();
+            };
+            let (conic, k2) = (p.conic.map(T::to_f32), tile_k2(p.opacity.to_f32()));
+            (r[1]..r[3])
+                .flat_map(|ty| (r[0]..r[2]).map(move |tx| (tx, ty)))
+                .filter(|&t| tile_hit(mean, conic, k2, t))
+                .map(|(tx, ty)| ty * grid.0 + tx)
+                .collect()
         })
         .collect();
     let mut counts = vec![0u32; n_tiles + 1];
-    for r in rects.iter().flatten() {
-        for ty in r[1]..r[3] {
-            for tx in r[0]..r[2] {
-                counts[(ty * grid.0 + tx) as usize + 1] += 1;
-            }
-        }
+    for &t in touched.iter().flatten() {
+        counts[t as usize + 1] += 1;
     }
     for t in 0..n_tiles {
         counts[t + 1] += counts[t];
     }
     let mut fill = counts.clone();
     let mut splats = vec![0u32; counts[n_tiles] as usize];
-    for (i, r) in rects.iter().enumerate() {
-        if let Some(r) = r {
-            for ty in r[1]..r[3] {
-                for tx in r[0]..r[2] {
-                    let t = (ty * grid.0 + tx) as usize;
-                    splats[fill[t] as usize] = i as u32;
-                    fill[t] += 1;
-                }
-            }
+    for (i, tiles) in touched.iter().enumerate() {
+        for &t in tiles {
+            splats[fill[t as usize] as usize] = i as u32;
+            fill[t as usize] += 1;
         }
     }
     let ranges: Vec<[u32; 2]> = (0..n_tiles).map(|t| [counts[t], counts[t + 1]]).collect();
@@ -217,5 +258,101 @@ pub fn rasterize(
         last_contrib: r.last_contrib,
         tile_ranges: r.tile_ranges,
         tile_splats: r.tile_splats,
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    #![allow(clippy::unwrap_used)]
+    use super::*;
+    use rand::{Rng, SeedableRng};
+
+    /// d·conic·d at `p` for a splat at `mean`.
+    fn maha(mean: [f32; 2], conic: [f32; 3], p: [f32; 2]) -> f32 {
+        let (dx, dy) = (p[0] - mean[0], p[1] - mean[1]);
+        conic[0] * dx * dx + 2.0 * conic[1] * dx * dy + conic[2] * dy * dy
+    }
+
+    /// A circle of radius 3σ = 6 px (k = 3 at opacity 1): the tile right of
+    /// it is hit only when its first pixel-centre column is within 6 px.
+    #[test]
+    fn tile_hit_known_circle() {
+        let conic = [0.25, 0.0, 0.25]; // σ = 2
+        let k2 = tile_k2(1.0);
+        assert_eq!(k2, 9.0);
+        // Tile (1, 0): pixel centres x ∈ [16.5, 31.5], y ∈ [0.5, 15.5].
+        assert!(tile_hit([10.6, 8.0], conic, k2, (1, 0)));
+        assert!(!tile_hit([10.4, 8.0], conic, k2, (1, 0)));
+        // Diagonal: corner (16.5, 16.5) of tile (1, 1) at distance 6·0.99 / 6·1.01.
+        let d = 6.0 / 2f32.sqrt();
+        assert!(tile_hit(
+            [16.5 - 0.99 * d, 16.5 - 0.99 * d],
+            conic,
+            k2,
+            (1, 1)
+        ));
+        assert!(!tile_hit(
+            [16.5 - 1.01 * d, 16.5 - 1.01 * d],
+            conic,
+            k2,
+            (1, 1)
+        ));
+        // Low opacity shrinks k; 255·o ≤ 1 touches nothing, not even its own tile.
+        assert!(tile_k2(0.1) < 9.0);
+        assert!(!tile_hit([8.0, 8.0], conic, tile_k2(1.0 / 255.0), (0, 0)));
+        assert!(tile_hit([8.0, 8.0], conic, tile_k2(0.01), (0, 0)));
+    }
+
+    /// Against brute force on random anisotropic splats: every tile with a
+    /// pixel centre inside the ellipse is hit, and every hit tile has a
+    /// point of its pixel-centre rectangle (fine grid) inside it.
+    #[test]
+    fn tile_hit_matches_brute_force() {
+        let mut r = rand_pcg::Pcg64::seed_from_u64(7);
+        let (mut hits, mut misses) = (0, 0);
+        for _ in 0..400 {
+            let mean = [
+                r.random_range(-10.0..74.0f32),
+                r.random_range(-10.0..74.0f32),
+            ];
+            let (s1, s2) = (r.random_range(0.5..12.0f32), r.random_range(0.5..12.0f32));
+            let th = r.random_range(0.0..std::f32::consts::PI);
+            let (c, s) = (th.cos(), th.sin());
+            // Σ = R diag(s1², s2²) Rᵀ, conic = Σ⁻¹.
+            let (sxx, sxy, syy) = (
+                c * c * s1 * s1 + s * s * s2 * s2,
+                c * s * (s1 * s1 - s2 * s2),
+                s * s * s1 * s1 + c * c * s2 * s2,
+            );
+            let det = sxx * syy - sxy * sxy;
+            let conic = [syy / det, -sxy / det, sxx / det];
+            let k2 = tile_k2(r.random_range(0.02..1.0f32));
+            for ty in 0..4u32 {
+                for tx in 0..4u32 {
+                    let hit = tile_hit(mean, conic, k2, (tx, ty));
+                    let x0 = (tx * 16) as f32 + 0.5;
+                    let y0 = (ty * 16) as f32 + 0.5;
+                    let pixel_in = (0..16).any(|j| {
+                        (0..16).any(|i| maha(mean, conic, [x0 + i as f32, y0 + j as f32]) <= k2)
+                    });
+                    if pixel_in {
+                        assert!(hit, "tile ({tx}, {ty}) mean {mean:?} conic {conic:?}");
+                    }
+                    if hit {
+                        let fine = (0..=150).any(|j| {
+                            (0..=150).any(|i| {
+                                let p = [x0 + 0.1 * i as f32, y0 + 0.1 * j as f32];
+                                maha(mean, conic, p) <= k2 * 1.001 + 1e-3
+                            })
+                        });
+                        assert!(fine, "tile ({tx}, {ty}) hit but no point inside");
+                        hits += 1;
+                    } else {
+                        misses += 1;
+                    }
+                }
+            }
+        }
+        assert!(hits > 500 && misses > 500, "{hits} hits, {misses} misses");
     }
 }
