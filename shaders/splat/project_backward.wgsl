@@ -8,16 +8,18 @@
 
 // Bindings and injected constants: the `kernel!` declaration in
 // crates/splat/src/gpu/project_backward.rs.
-// The geometry gradients share one planar buffer (so the kernel binds 8
-// storage buffers, the GL fallback's per-stage limit): means [0, 3n),
-// log-scales [3n, 6n), rotations [6n, 10n), opacity logits [10n, 11n),
-// ‖dL/d mean2d‖ [11n, 12n). The host copies the segments out.
+// `io` holds dL/d projected splat (12 floats per splat) in [0, 12n) and,
+// after it, the geometry gradients in planar segments (one buffer for
+// inputs and outputs keeps the kernel at 8 storage buffers with the camera,
+// the GL fallback's per-stage limit): means [12n, 15n), log-scales
+// [15n, 18n), rotations [18n, 22n), opacity logits [22n, 23n),
+// ‖dL/d mean2d‖ [23n, 24n). The host copies the segments out.
 
-fn set_mean(i: u32, a: u32, v: f32) { g_geom[3u * i + a] = v; }
-fn set_log_scale(i: u32, a: u32, v: f32) { g_geom[3u * cam.n + 3u * i + a] = v; }
-fn set_rotation(i: u32, a: u32, v: f32) { g_geom[6u * cam.n + 4u * i + a] = v; }
-fn set_opacity(i: u32, v: f32) { g_geom[10u * cam.n + i] = v; }
-fn set_mean2d_abs(i: u32, v: f32) { g_geom[11u * cam.n + i] = v; }
+fn set_mean(i: u32, a: u32, v: f32) { io[12u * cam.n + 3u * i + a] = v; }
+fn set_log_scale(i: u32, a: u32, v: f32) { io[15u * cam.n + 3u * i + a] = v; }
+fn set_rotation(i: u32, a: u32, v: f32) { io[18u * cam.n + 4u * i + a] = v; }
+fn set_opacity(i: u32, v: f32) { io[22u * cam.n + i] = v; }
+fn set_mean2d_abs(i: u32, v: f32) { io[23u * cam.n + i] = v; }
 
 fn write_zero(i: u32) {
     for (var a = 0u; a < 3u; a++) {
@@ -42,10 +44,10 @@ fn project_backward_main(@builtin(workgroup_id) wid: vec3<u32>, @builtin(num_wor
         return;
     }
     let vb = 12u * i;
-    let v_mean2d = vec2<f32>(v_proj[vb], v_proj[vb + 1u]);
-    let v_conic = vec3<f32>(v_proj[vb + 4u], v_proj[vb + 5u], v_proj[vb + 6u]);
-    let v_opacity = v_proj[vb + 7u];
-    let v_color = vec3<f32>(v_proj[vb + 8u], v_proj[vb + 9u], v_proj[vb + 10u]);
+    let v_mean2d = vec2<f32>(io[vb], io[vb + 1u]);
+    let v_conic = vec3<f32>(io[vb + 4u], io[vb + 5u], io[vb + 6u]);
+    let v_opacity = io[vb + 7u];
+    let v_color = vec3<f32>(io[vb + 8u], io[vb + 9u], io[vb + 10u]);
     set_mean2d_abs(i, sqrt(v_mean2d.x * v_mean2d.x + v_mean2d.y * v_mean2d.y));
 
     let m = vec3<f32>(means[3u * i], means[3u * i + 1u], means[3u * i + 2u]);

@@ -15,7 +15,7 @@ use super::loss::{Loss, LossArgs, LossUniforms, blocks};
 use super::mcmc::McmcKernels;
 use super::project::ParamBuffers;
 use super::project_backward::GradBuffers;
-use super::rasterize_backward::GRAD_STRIDE;
+use super::project_backward::V_PROJ_FLOATS;
 use super::ssim::{Ssim, SsimArgs};
 use super::{GpuContext, GpuError, GpuOptions};
 use crate::backend::{MeansNoise, Regularization};
@@ -279,7 +279,7 @@ impl StepKernels {
         v_image: &wgpu::Buffer,
         reg: &Regularization,
     ) -> std::result::Result<(), GpuError> {
-        let v_proj = rec.storage("v_proj", st.params.n as u64 * GRAD_STRIDE * 4);
+        let v_proj = rec.storage("v_proj", st.params.n as u64 * V_PROJ_FLOATS * 4);
         record_backward(
             ctx,
             &self.bwd,

@@ -5,8 +5,8 @@
 use super::forward::ForwardState;
 use super::kernel::Recorder;
 use super::project::ParamBuffers;
-use super::project_backward::{GradBuffers, ProjectBackward, ProjectBackwardArgs};
-use super::rasterize_backward::{GRAD_STRIDE, RasterBackwardBindings, RasterizeBackward};
+use super::project_backward::{GradBuffers, ProjectBackward, ProjectBackwardArgs, V_PROJ_FLOATS};
+use super::rasterize_backward::{RasterBackwardBindings, RasterizeBackward};
 use super::{GpuContext, GpuError};
 use crate::types::{ProjectedGrads, SplatGrads};
 
@@ -25,9 +25,10 @@ impl BackwardKernels {
     }
 }
 
-/// A buffer for per-splat projected gradients (`12·n` f32).
+/// A buffer for per-splat projected gradients (`12·n` f32) and the
+/// backward projection's scratch ([`V_PROJ_FLOATS`]`·n` f32 in all).
 pub fn projected_grads_buffer(ctx: &GpuContext, n: u32) -> wgpu::Buffer {
-    ctx.storage("v_proj", n as u64 * GRAD_STRIDE * 4)
+    ctx.storage("v_proj", n as u64 * V_PROJ_FLOATS * 4)
 }
 
 /// Buffers of one backward pass.
@@ -36,7 +37,8 @@ pub struct BackwardArgs<'a> {
     pub state: &'a ForwardState,
     /// dL/d image (`3·w·h` f32).
     pub v_image: &'a wgpu::Buffer,
-    /// Scratch / output: dL/d projected splats (`12·n` f32).
+    /// Scratch / output: dL/d projected splats in the first `12·n` f32
+    /// ([`projected_grads_buffer`]).
     pub v_proj: &'a wgpu::Buffer,
     pub grads: &'a GradBuffers,
 }
@@ -63,6 +65,7 @@ pub fn record_backward(
             grads: a.v_proj,
         },
         s.grid,
+        s.n,
     )?;
     k.project_backward.dispatch(
         ctx,

@@ -6,14 +6,21 @@
 
 use super::kernel::{Recorder, groups_1d, kernel};
 use super::project::{CameraUniforms, ParamBuffers};
+use super::rasterize_backward::GRAD_STRIDE;
 use super::{GpuContext, GpuError};
 
 /// Invocations per workgroup.
 pub const WORKGROUP_SIZE: u32 = 256;
-/// f32 per splat in the planar geometry-gradient scratch (`g_geom`: means 3,
-/// log-scales 3, rotations 4, opacity 1, ‖dL/d mean2d‖ 1), which keeps the
-/// kernel at 8 storage bindings.
+/// f32 per splat in the planar geometry-gradient segment (means 3,
+/// log-scales 3, rotations 4, opacity 1, ‖dL/d mean2d‖ 1) that follows the
+/// projected gradients in the kernel's `io` buffer.
 pub const GEOM_FLOATS: u64 = 12;
+/// f32 per splat of a projected-gradient buffer as this kernel binds it:
+/// dL/d projected splat ([`GRAD_STRIDE`], `[0, 12n)`) then the planar
+/// geometry gradients (`[12n, 24n)`). One buffer for both keeps the kernel
+/// at 7 storage bindings plus the camera, which then also goes in storage
+/// like every other kernel's uniforms (`KernelDecl::uniform_in_storage`).
+pub const V_PROJ_FLOATS: u64 = GRAD_STRIDE + GEOM_FLOATS;
 
 kernel! {
     /// The compiled kernel.
@@ -26,8 +33,7 @@ kernel! {
         rotations: read "array<f32>",
         opacity_logits: read "array<f32>",
         sh: read "array<f32>",
-        v_proj: read "array<f32>",
-        g_geom: read_write "array<f32>",
+        io: read_write "array<f32>",
         g_sh: read_write "array<f32>",
     }
     entry_points { project_backward_main: [WORKGROUP_SIZE] }
@@ -65,7 +71,9 @@ impl GradBuffers {
 pub struct ProjectBackwardArgs<'a> {
     pub cam: &'a wgpu::Buffer,
     pub params: &'a ParamBuffers,
-    /// `12·n` f32 ([`crate::types::ProjectedGrads`] layout).
+    /// At least [`V_PROJ_FLOATS`]`·n` f32: dL/d projected splats
+    /// ([`crate::types::ProjectedGrads`] layout) in the first `12·n`, the
+    /// rest scratch.
     pub v_proj: &'a wgpu::Buffer,
     pub grads: &'a GradBuffers,
 }
@@ -78,7 +86,13 @@ impl ProjectBackward {
         a: &ProjectBackwardArgs,
     ) -> Result<(), GpuError> {
         let (p, g) = (a.params, a.grads);
-        let geom = rec.storage("g_geom", p.n as u64 * GEOM_FLOATS * 4);
+        let need = p.n as u64 * V_PROJ_FLOATS * 4;
+        if a.v_proj.size() < need {
+            return Err(GpuError::InvalidInput(format!(
+                "projected-gradient buffer of {} bytes, {need} needed",
+                a.v_proj.size()
+            )));
+        }
         self.record(
             ctx,
             rec,
@@ -90,14 +104,15 @@ impl ProjectBackward {
                 rotations: &p.rotations,
                 opacity_logits: &p.opacity_logits,
                 sh: &p.sh,
-                v_proj: a.v_proj,
-                g_geom: &geom,
+                io: a.v_proj,
                 g_sh: &g.sh,
             },
             groups_1d(p.n, WORKGROUP_SIZE),
         )?;
-        // Planar segments of `g_geom` → the per-group gradient buffers.
+        // Planar segments after the projected gradients → the per-group
+        // gradient buffers.
         let n = p.n as u64 * 4;
+        let geom = GRAD_STRIDE * n;
         for (seg, dst, floats) in [
             (0, &g.means, 3),
             (3, &g.log_scales, 3),
@@ -107,7 +122,7 @@ impl ProjectBackward {
         ] {
             if n > 0 {
                 rec.encoder
-                    .copy_buffer_to_buffer(&geom, seg * n, dst, 0, floats * n);
+                    .copy_buffer_to_buffer(a.v_proj, geom + seg * n, dst, 0, floats * n);
             }
         }
         Ok(())

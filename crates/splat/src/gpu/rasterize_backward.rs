@@ -33,17 +33,28 @@ kernel! {
 }
 
 impl RasterizeBackward {
-    /// Record: clear `b.grads` (`12·n` f32, [`crate::types::ProjectedGrads`]
-    /// layout), then accumulate dL/d(projected splat) into it from
-    /// `b.v_image` (dL/d image, `3·w·h` f32) over the `grid` tiles.
+    /// Record: clear the first `12·n` f32 of `b.grads`
+    /// ([`crate::types::ProjectedGrads`] layout), then accumulate dL/d(projected
+    /// splat) of the `n` splats into them from `b.v_image` (dL/d image,
+    /// `3·w·h` f32) over the `grid` tiles.
     pub fn dispatch(
         &self,
         ctx: &GpuContext,
         rec: &mut Recorder,
         b: &RasterBackwardBindings,
         grid: (u32, u32),
+        n: u32,
     ) -> Result<(), GpuError> {
-        rec.encoder.clear_buffer(b.grads, 0, None);
+        let size = n as u64 * GRAD_STRIDE * 4;
+        if b.grads.size() < size {
+            return Err(GpuError::InvalidInput(format!(
+                "projected-gradient buffer of {} bytes, {size} needed",
+                b.grads.size()
+            )));
+        }
+        if size > 0 {
+            rec.encoder.clear_buffer(b.grads, 0, Some(size));
+        }
         self.record(ctx, rec, "rasterize_backward_main", b, [grid.0, grid.1, 1])
     }
 }

@@ -10,7 +10,7 @@ use crate::gpu::backward::{
 };
 use crate::gpu::forward::{ForwardKernels, forward, upload_splats};
 use crate::gpu::kernel::Recorder;
-use crate::gpu::project_backward::{GradBuffers, ProjectBackwardArgs};
+use crate::gpu::project_backward::{GradBuffers, ProjectBackwardArgs, V_PROJ_FLOATS};
 use crate::reference;
 use crate::types::{ProjectedGrads, RenderOptions};
 use rand::{Rng, SeedableRng};
@@ -115,7 +115,9 @@ fn run(c: &GpuContext) {
             check(&format!("case {ci} {name}"), &a[k], &b[k]);
         }
         // Stage 2: project backward fed the reference's projected gradients.
-        let vp_buf = c.upload("v_proj_ref", &ref_vp);
+        let mut vp_ref: Vec<f32> = bytemuck::cast_slice(&ref_vp).to_vec();
+        vp_ref.resize(params.n as usize * V_PROJ_FLOATS as usize, f32::NAN);
+        let vp_buf = c.upload("v_proj_ref", &vp_ref);
         let mut rec = Recorder::new(c, false);
         bk.project_backward
             .dispatch(
