@@ -190,57 +190,95 @@ const SH_C3_4: f32 = -0.4570457994644658;
 const SH_C3_5: f32 = 1.445305721320277;
 const SH_C3_6: f32 = -0.5900435899266435;
 
-// Real SH basis (INRIA constants and signs), (degree+1)² entries, rest 0.
-fn sh_basis(degree: u32, d: vec3<f32>) -> array<f32, 16> {
-    var b: array<f32, 16>;
-    b[0] = SH_C0;
-    if (degree == 0u) { return b; }
-    let x = d.x; let y = d.y; let z = d.z;
-    b[1] = -SH_C1 * y;
-    b[2] = SH_C1 * z;
-    b[3] = -SH_C1 * x;
-    if (degree == 1u) { return b; }
-    let xx = x * x; let yy = y * y; let zz = z * z;
-    let xy = x * y; let yz = y * z; let xz = x * z;
-    b[4] = SH_C2_0 * xy;
-    b[5] = SH_C2_1 * yz;
-    b[6] = SH_C2_2 * (2.0 * zz - xx - yy);
-    b[7] = SH_C2_3 * xz;
-    b[8] = SH_C2_4 * (xx - yy);
-    if (degree == 2u) { return b; }
-    b[9] = SH_C3_0 * y * (3.0 * xx - yy);
-    b[10] = SH_C3_1 * xy * z;
-    b[11] = SH_C3_2 * y * (4.0 * zz - xx - yy);
-    b[12] = SH_C3_3 * z * (2.0 * zz - 3.0 * xx - 3.0 * yy);
-    b[13] = SH_C3_4 * x * (4.0 * zz - xx - yy);
-    b[14] = SH_C3_5 * z * (xx - yy);
-    b[15] = SH_C3_6 * x * (xx - 3.0 * yy);
-    return b;
+// Sixteen SH values, entry k in component k % 4 of `v[k / 4]`. Named
+// vectors rather than an array: `sh_at` picks entry k with selects, so a
+// loop over k stays in registers (llvmpipe keeps a dynamically indexed
+// private array in per-lane scratch memory, ~64 scattered stores per
+// invocation for the basis and its gradient).
+struct Sh16 {
+    v0: vec4<f32>,
+    v1: vec4<f32>,
+    v2: vec4<f32>,
+    v3: vec4<f32>,
 }
 
-// d basis_k / d(x, y, z).
-fn sh_basis_grad(degree: u32, d: vec3<f32>) -> array<vec3<f32>, 16> {
-    var g: array<vec3<f32>, 16>;
-    if (degree == 0u) { return g; }
+// Entry `k` (< 16) of `b`.
+fn sh_at(b: Sh16, k: u32) -> f32 {
+    var v = b.v0;
+    v = select(v, b.v1, k >= 4u);
+    v = select(v, b.v2, k >= 8u);
+    v = select(v, b.v3, k >= 12u);
+    let c = k & 3u;
+    return select(select(select(v.x, v.y, c == 1u), v.z, c == 2u), v.w, c == 3u);
+}
+
+// Entries above degree `degree` set to 0.
+fn sh_truncate(b: Sh16, degree: u32) -> Sh16 {
+    var r = b;
+    let zero = vec4<f32>(0.0);
+    if (degree < 1u) {
+        r.v0 = vec4<f32>(r.v0.x, 0.0, 0.0, 0.0);
+    }
+    if (degree < 2u) {
+        r.v1 = zero;
+        r.v2 = zero;
+    }
+    if (degree < 3u) {
+        r.v2 = vec4<f32>(r.v2.x, 0.0, 0.0, 0.0);
+        r.v3 = zero;
+    }
+    return r;
+}
+
+// Real SH basis (INRIA constants and signs), (degree+1)² entries, rest 0.
+fn sh_basis(degree: u32, d: vec3<f32>) -> Sh16 {
     let x = d.x; let y = d.y; let z = d.z;
-    g[1] = vec3<f32>(0.0, -SH_C1, 0.0);
-    g[2] = vec3<f32>(0.0, 0.0, SH_C1);
-    g[3] = vec3<f32>(-SH_C1, 0.0, 0.0);
-    if (degree == 1u) { return g; }
-    g[4] = vec3<f32>(SH_C2_0 * y, SH_C2_0 * x, 0.0);
-    g[5] = vec3<f32>(0.0, SH_C2_1 * z, SH_C2_1 * y);
-    g[6] = vec3<f32>(-2.0 * SH_C2_2 * x, -2.0 * SH_C2_2 * y, 4.0 * SH_C2_2 * z);
-    g[7] = vec3<f32>(SH_C2_3 * z, 0.0, SH_C2_3 * x);
-    g[8] = vec3<f32>(2.0 * SH_C2_4 * x, -2.0 * SH_C2_4 * y, 0.0);
-    if (degree == 2u) { return g; }
     let xx = x * x; let yy = y * y; let zz = z * z;
-    g[9] = vec3<f32>(SH_C3_0 * 6.0 * x * y, SH_C3_0 * (3.0 * xx - 3.0 * yy), 0.0);
-    g[10] = vec3<f32>(SH_C3_1 * y * z, SH_C3_1 * x * z, SH_C3_1 * x * y);
-    g[11] = vec3<f32>(SH_C3_2 * (-2.0 * x * y), SH_C3_2 * (4.0 * zz - xx - 3.0 * yy), SH_C3_2 * (8.0 * y * z));
-    g[12] = vec3<f32>(SH_C3_3 * (-6.0 * x * z), SH_C3_3 * (-6.0 * y * z), SH_C3_3 * (6.0 * zz - 3.0 * xx - 3.0 * yy));
-    g[13] = vec3<f32>(SH_C3_4 * (4.0 * zz - 3.0 * xx - yy), SH_C3_4 * (-2.0 * x * y), SH_C3_4 * (8.0 * x * z));
-    g[14] = vec3<f32>(SH_C3_5 * 2.0 * x * z, -SH_C3_5 * 2.0 * y * z, SH_C3_5 * (xx - yy));
-    g[15] = vec3<f32>(SH_C3_6 * (3.0 * xx - 3.0 * yy), -SH_C3_6 * 6.0 * x * y, 0.0);
+    let xy = x * y; let yz = y * z; let xz = x * z;
+    var b: Sh16;
+    b.v0 = vec4<f32>(SH_C0, -SH_C1 * y, SH_C1 * z, -SH_C1 * x);
+    b.v1 = vec4<f32>(SH_C2_0 * xy, SH_C2_1 * yz, SH_C2_2 * (2.0 * zz - xx - yy), SH_C2_3 * xz);
+    b.v2 = vec4<f32>(SH_C2_4 * (xx - yy), SH_C3_0 * y * (3.0 * xx - yy), SH_C3_1 * xy * z,
+        SH_C3_2 * y * (4.0 * zz - xx - yy));
+    b.v3 = vec4<f32>(SH_C3_3 * z * (2.0 * zz - 3.0 * xx - 3.0 * yy), SH_C3_4 * x * (4.0 * zz - xx - yy),
+        SH_C3_5 * z * (xx - yy), SH_C3_6 * x * (xx - 3.0 * yy));
+    return sh_truncate(b, degree);
+}
+
+// d basis_k / d(x, y, z), one `Sh16` per axis.
+struct ShGrad {
+    x: Sh16,
+    y: Sh16,
+    z: Sh16,
+}
+
+fn sh_grad_at(g: ShGrad, k: u32) -> vec3<f32> {
+    return vec3<f32>(sh_at(g.x, k), sh_at(g.y, k), sh_at(g.z, k));
+}
+
+fn sh_basis_grad(degree: u32, d: vec3<f32>) -> ShGrad {
+    let x = d.x; let y = d.y; let z = d.z;
+    let xx = x * x; let yy = y * y; let zz = z * z;
+    var g: ShGrad;
+    g.x.v0 = vec4<f32>(0.0, 0.0, 0.0, -SH_C1);
+    g.y.v0 = vec4<f32>(0.0, -SH_C1, 0.0, 0.0);
+    g.z.v0 = vec4<f32>(0.0, 0.0, SH_C1, 0.0);
+    g.x.v1 = vec4<f32>(SH_C2_0 * y, 0.0, -2.0 * SH_C2_2 * x, SH_C2_3 * z);
+    g.y.v1 = vec4<f32>(SH_C2_0 * x, SH_C2_1 * z, -2.0 * SH_C2_2 * y, 0.0);
+    g.z.v1 = vec4<f32>(0.0, SH_C2_1 * y, 4.0 * SH_C2_2 * z, SH_C2_3 * x);
+    g.x.v2 = vec4<f32>(2.0 * SH_C2_4 * x, SH_C3_0 * 6.0 * x * y, SH_C3_1 * y * z, SH_C3_2 * (-2.0 * x * y));
+    g.y.v2 = vec4<f32>(-2.0 * SH_C2_4 * y, SH_C3_0 * (3.0 * xx - 3.0 * yy), SH_C3_1 * x * z,
+        SH_C3_2 * (4.0 * zz - xx - 3.0 * yy));
+    g.z.v2 = vec4<f32>(0.0, 0.0, SH_C3_1 * x * y, SH_C3_2 * (8.0 * y * z));
+    g.x.v3 = vec4<f32>(SH_C3_3 * (-6.0 * x * z), SH_C3_4 * (4.0 * zz - 3.0 * xx - yy), SH_C3_5 * 2.0 * x * z,
+        SH_C3_6 * (3.0 * xx - 3.0 * yy));
+    g.y.v3 = vec4<f32>(SH_C3_3 * (-6.0 * y * z), SH_C3_4 * (-2.0 * x * y), -SH_C3_5 * 2.0 * y * z,
+        -SH_C3_6 * 6.0 * x * y);
+    g.z.v3 = vec4<f32>(SH_C3_3 * (6.0 * zz - 3.0 * xx - 3.0 * yy), SH_C3_4 * (8.0 * x * z), SH_C3_5 * (xx - yy), 0.0);
+    // Entry 0 (constant) has no gradient; the rest up to `degree`.
+    g.x = sh_truncate(g.x, degree);
+    g.y = sh_truncate(g.y, degree);
+    g.z = sh_truncate(g.z, degree);
     return g;
 }
 

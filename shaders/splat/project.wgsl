@@ -26,7 +26,7 @@ fn project_main(@builtin(workgroup_id) wid: vec3<u32>, @builtin(num_workgroups) 
         var col = vec3<f32>(0.0);
         for (var k = 0u; k < ncoef; k++) {
             let o = base + 3u * k;
-            col += basis[k] * vec3<f32>(sh[o], sh[o + 1u], sh[o + 2u]);
+            col += sh_at(basis, k) * vec3<f32>(sh[o], sh[o + 1u], sh[o + 2u]);
         }
         col = col + vec3<f32>(0.5);
         col = vec3<f32>(max0(col.x), max0(col.y), max0(col.z));

@@ -69,7 +69,7 @@ fn project_backward_main(@builtin(workgroup_id) wid: vec3<u32>, @builtin(num_wor
     var raw = vec3<f32>(0.0);
     for (var k = 0u; k < ncoef; k++) {
         let o = base + 3u * k;
-        raw += basis[k] * vec3<f32>(sh[o], sh[o + 1u], sh[o + 2u]);
+        raw += sh_at(basis, k) * vec3<f32>(sh[o], sh[o + 1u], sh[o + 2u]);
     }
     let col = raw + vec3<f32>(0.5);
     let col_out = vec3<f32>(max0(col.x), max0(col.y), max0(col.z));
@@ -86,11 +86,11 @@ fn project_backward_main(@builtin(workgroup_id) wid: vec3<u32>, @builtin(num_wor
     for (var k = 0u; k < ncoef; k++) {
         let o = base + 3u * k;
         let shk = vec3<f32>(sh[o], sh[o + 1u], sh[o + 2u]);
-        g_sh[o] = basis[k] * vc.x;
-        g_sh[o + 1u] = basis[k] * vc.y;
-        g_sh[o + 2u] = basis[k] * vc.z;
+        g_sh[o] = sh_at(basis, k) * vc.x;
+        g_sh[o + 1u] = sh_at(basis, k) * vc.y;
+        g_sh[o + 2u] = sh_at(basis, k) * vc.z;
         let w = shk * vc;
-        v_dir += (w.x + w.y + w.z) * bgrad[k];
+        v_dir += (w.x + w.y + w.z) * sh_grad_at(bgrad, k);
     }
     // Stored coefficients above the active degree get no gradient.
     for (var o = base + 3u * ncoef; o < base + cam.sh_stored * 3u; o++) {
