@@ -57,7 +57,8 @@ fn main() -> std::process::ExitCode {
 
 fn run() -> Res<()> {
     let davis = common::davis_dir();
-    let opts = common::romo_options()?;
+    let mut opts = common::romo_options()?;
+    opts.record_stages = true;
     let only = common::sequences();
     let maxf: usize = match std::env::var("MAXF") {
         Ok(s) => s.parse().map_err(|e| format!("MAXF={s}: {e}"))?,
@@ -109,6 +110,7 @@ fn run() -> Res<()> {
         let thrs = [0.3f32, 0.7, 0.9];
         let mut tc = [Counts::default(); 3];
         let mut vc = Counts::default();
+        let mut sc = vec![Counts::default(); seg.stages.len()];
         for (i, p) in paths.iter().enumerate() {
             let gtp = &gts[i];
             let gt_full: Vec<bool> = gtp.data.iter().map(|v| *v > 0.5).collect();
@@ -134,6 +136,29 @@ fn run() -> Res<()> {
                     .collect::<Vec<_>>(),
                 &gt_grid,
             );
+            if std::env::var_os("PERFRAME").is_some() {
+                let mut row = Vec::new();
+                let mut one = |name: &str, pred: &[bool]| {
+                    let mut c = Counts::default();
+                    c.add(pred, &gt_grid);
+                    row.push(format!("{name} {:.2}/{:.2}", c.p(), c.r()));
+                };
+                one("U", &seg.u[i]);
+                one("notL", &seg.l[i].iter().map(|b| !b).collect::<Vec<_>>());
+                for (name, st) in &seg.stages {
+                    one(
+                        name,
+                        &st[i].data.iter().map(|v| *v > thr).collect::<Vec<_>>(),
+                    );
+                }
+                eprintln!("{s} {i:3} P/R {}", row.join(" "));
+            }
+            for (c, (_, st)) in sc.iter_mut().zip(&seg.stages) {
+                c.add(
+                    &st[i].data.iter().map(|v| *v > thr).collect::<Vec<_>>(),
+                    &gt_grid,
+                );
+            }
             for (c, t) in tc.iter_mut().zip(thrs) {
                 c.add(
                     &seg.probs[i].data.iter().map(|v| *v > t).collect::<Vec<_>>(),
@@ -197,6 +222,13 @@ fn run() -> Res<()> {
             vc.p(),
             vc.r(),
         );
+        let stages: Vec<String> = seg
+            .stages
+            .iter()
+            .zip(&sc)
+            .map(|((name, _), c)| format!("{name} J {:.3} P {:.2} R {:.2}", c.jm(), c.p(), c.r()))
+            .collect();
+        eprintln!("{s:15} stages | {}", stages.join(" | "));
         sums[0] += gc.jm();
         sums[1] += fc.jm();
         sums[2] += fc.p();

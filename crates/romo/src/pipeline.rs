@@ -150,6 +150,10 @@ pub struct RomoOptions {
     /// Also write `motion/<name>.png` overlays for looking at.
     #[cfg_attr(feature = "cli", arg(long))]
     pub overlays: bool,
+    /// Keep the grid probabilities after each refinement step in
+    /// [`Segmentation::stages`], for diagnosis (default false).
+    #[cfg_attr(feature = "cli", arg(skip))]
+    pub record_stages: bool,
 }
 
 impl Default for RomoOptions {
@@ -172,6 +176,7 @@ impl Default for RomoOptions {
             out: None,
             save_probabilities: false,
             overlays: false,
+            record_stages: false,
         }
     }
 }
@@ -322,6 +327,10 @@ pub struct Segmentation {
     pub l: Vec<Vec<bool>>,
     /// Diagnostics.
     pub report: RomoReport,
+    /// With `RomoOptions::record_stages`: the grid probabilities after each
+    /// refinement step, by step name (`mlp`, `temporal`, `regions`,
+    /// `veto`, `objects`, …), in order.
+    pub stages: Vec<(String, Vec<Plane>)>,
 }
 
 struct Timer<'a>(&'a mut BTreeMap<String, f64>);
@@ -859,7 +868,8 @@ pub fn segment_frames(
             data: d,
         })
         .collect();
-    let mut planes = refine_grid(planes, &pr, &labels, o, &mut tm);
+    let mut stages = Vec::new();
+    let mut planes = refine_grid(planes, &pr, &labels, o, &mut tm, &mut stages);
     keep_frames_without_evidence(&mut planes, &fits, &mut report);
     report_frames(&labels, &fits, &planes, o, &mut report);
     for (k, v) in timings {
@@ -870,6 +880,7 @@ pub fn segment_frames(
         u: labels.iter().map(|l| l.u.clone()).collect(),
         l: labels.iter().map(|l| l.l.clone()).collect(),
         report,
+        stages,
     })
 }
 
@@ -952,7 +963,14 @@ fn refine_grid(
     labels: &[FrameLabels],
     o: &RomoOptions,
     tm: &mut Timer<'_>,
+    stages: &mut Vec<(String, Vec<Plane>)>,
 ) -> Vec<Plane> {
+    let mut record = |name: &str, p: &[Plane]| {
+        if o.record_stages {
+            stages.push((name.to_string(), p.to_vec()));
+        }
+    };
+    record("mlp", &planes);
     let mut planes = if o.refine.temporal_along_flow {
         tm.time("refine", || {
             temporal_smooth_flow(
@@ -968,6 +986,7 @@ fn refine_grid(
     } else {
         planes
     };
+    record("temporal", &planes);
     if o.regions.enabled {
         tm.time("regions", || {
             planes.par_iter_mut().enumerate().for_each(|(t, p)| {
@@ -985,6 +1004,7 @@ fn refine_grid(
                 );
             })
         });
+        record("regions", &planes);
     }
     if o.refine.static_veto_factor > 0.0 {
         for (p, l) in planes.iter_mut().zip(labels) {
@@ -995,6 +1015,7 @@ fn refine_grid(
                 }
             }
         }
+        record("veto", &planes);
     }
     if o.refine.objects.method == ObjectMethod::GraphCut {
         let ev = Evidence {
@@ -1016,6 +1037,7 @@ fn refine_grid(
                 *v = if b { 1.0 } else { 0.0 };
             }
         }
+        record("objects", &planes);
     }
     if !o.refine.temporal_along_flow {
         for _ in 0..o.refine.temporal_passes {

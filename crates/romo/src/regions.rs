@@ -16,6 +16,7 @@
 //! recall where the MLP already saw most of an object.
 
 use crate::flow::Flow;
+use crate::plane::{Plane, Rgb};
 use serde::{Deserialize, Serialize};
 
 /// Region-completion options.
@@ -105,16 +106,58 @@ impl Forest {
 /// pixel indices, equal within a region). Edges join 8-neighbours with
 /// weight |Δflow| / scale.
 pub fn flow_segments(flow: &Flow, scale: f32, k: f32, min_size: usize) -> Vec<u32> {
-    let (w, h) = (flow.w(), flow.h());
-    let n = w * h;
     let s = scale.max(1e-6);
-    let mut edges: Vec<(f32, u32, u32)> = Vec::with_capacity(4 * n);
     let (fu, fv) = (&flow.u.data, &flow.v.data);
-    let diff = |a: usize, b: usize| {
-        let du = fu[a] - fu[b];
-        let dv = fv[a] - fv[b];
-        (du * du + dv * dv).sqrt() / s
-    };
+    segment(
+        flow.w(),
+        flow.h(),
+        |a, b| {
+            let du = fu[a] - fu[b];
+            let dv = fv[a] - fv[b];
+            (du * du + dv * dv).sqrt() / s
+        },
+        k,
+        min_size,
+    )
+}
+
+/// Superpixels of a colour image (channels in [0, 1]): Felzenszwalb &
+/// Huttenlocher's segmentation with the Euclidean RGB distance of
+/// 8-neighbours as edge weight, after the Gaussian blur (σ = 0.8) their
+/// paper applies first. Labels as in [`flow_segments`].
+pub fn colour_segments(rgb: &Rgb, k: f32, min_size: usize) -> Vec<u32> {
+    let c: [Plane; 3] = std::array::from_fn(|i| rgb.c[i].gaussian(0.8));
+    segment(
+        rgb.w(),
+        rgb.h(),
+        |a, b| {
+            c.iter()
+                .map(|p| {
+                    let d = p.data[a] - p.data[b];
+                    d * d
+                })
+                .sum::<f32>()
+                .sqrt()
+        },
+        k,
+        min_size,
+    )
+}
+
+/// Felzenszwalb & Huttenlocher's graph segmentation of a `w × h` grid with
+/// 8-neighbour edge weights `diff(a, b)`: edges in increasing weight merge
+/// two components when the weight is at most both components' internal
+/// difference plus `k / size`; components smaller than `min_size` are then
+/// merged along their cheapest edges.
+fn segment(
+    w: usize,
+    h: usize,
+    diff: impl Fn(usize, usize) -> f32,
+    k: f32,
+    min_size: usize,
+) -> Vec<u32> {
+    let n = w * h;
+    let mut edges: Vec<(f32, u32, u32)> = Vec::with_capacity(4 * n);
     for y in 0..h {
         for x in 0..w {
             let i = y * w + x;
@@ -197,7 +240,6 @@ pub fn complete(prob: &mut [f32], labels: &[u32], threshold: f32, fixed: Option<
 mod tests {
     #![allow(clippy::unwrap_used, clippy::expect_used)]
     use super::*;
-    use crate::plane::Plane;
 
     /// Background flow: a smooth depth ramp (1.0–2.0 px); a 12×10 object
     /// moving with (−3, 0.5) px, its upper quarter ("head") unseen by the
@@ -230,6 +272,41 @@ mod tests {
             assert_eq!(lab[i], want, "pixel {i} (object {o})");
         }
         assert_ne!(lab[first_obj], lab[first_bg]);
+    }
+
+    /// Two textured colour regions meeting along a diagonal: no
+    /// superpixel crosses the edge, and each side falls into few
+    /// superpixels.
+    #[test]
+    fn colour_superpixels_stop_at_a_colour_edge() {
+        let (w, h) = (48, 32);
+        let side = |x: usize, y: usize| x + y / 2 >= 28;
+        let tex = |x: usize, y: usize| 0.03 * ((x * 5 + y * 3) % 4) as f32;
+        let rgb = Rgb {
+            c: std::array::from_fn(|k| {
+                Plane::from_fn(w, h, move |x, y| {
+                    let base = if side(x, y) {
+                        [0.7, 0.3, 0.2]
+                    } else {
+                        [0.2, 0.4, 0.6]
+                    };
+                    base[k] + tex(x, y)
+                })
+            }),
+        };
+        let lab = colour_segments(&rgb, 1.0, 20);
+        let mut per_side = [
+            std::collections::BTreeSet::new(),
+            std::collections::BTreeSet::new(),
+        ];
+        for (i, l) in lab.iter().enumerate() {
+            per_side[usize::from(side(i % w, i / w))].insert(*l);
+        }
+        assert!(per_side[0].is_disjoint(&per_side[1]), "{per_side:?}");
+        assert!(
+            per_side[0].len() <= 3 && per_side[1].len() <= 3,
+            "{per_side:?}"
+        );
     }
 
     #[test]
