@@ -477,18 +477,7 @@ pub fn probe_step_seconds(
         s.sh[i * coeffs * 3 + 1] = v - 0.5;
         s.sh[i * coeffs * 3 + 2] = w - 0.5;
     }
-    let camera = RenderCamera {
-        width,
-        height,
-        fx: width as f32,
-        fy: width as f32,
-        cx: width as f32 / 2.0,
-        cy: height as f32 / 2.0,
-        rotation: [[1.0, 0.0, 0.0], [0.0, 1.0, 0.0], [0.0, 0.0, 1.0]],
-        translation: [0.0; 3],
-        near: 0.01,
-        far: 100.0,
-    };
+    let camera = RenderCamera::at_origin(width, height, width as f32);
     let target: Vec<f32> = (0..(width * height * 3) as usize)
         .map(|i| ((i * 7919) % 255) as f32 / 255.0)
         .collect();

@@ -157,9 +157,11 @@ fn run_video_end_to_end_without_a_split() {
     assert_eq!(base["masked_views"], 0);
     assert_eq!(base["test"]["views"].as_array().unwrap().len(), views.len());
     assert!(base["test"]["mean_psnr"].as_f64().unwrap().is_finite());
-    // Both are also scored on the held-out frames' static pixels (RoMo's masks).
+    // Both are also scored on the held-out frames' static pixels (RoMo's
+    // masks), over the frames in which the masks leave out pixels.
     for o in [&first["train"], base] {
-        assert_eq!(o["test_static"]["masked_views"], views.len());
+        let m = o["test_static"]["masked_views"].as_u64().unwrap() as usize;
+        assert!(m >= 1 && m <= views.len(), "{m} of {}", views.len());
         assert!(o["test_static"]["mean_psnr"].as_f64().unwrap().is_finite());
     }
     let html = std::fs::read_to_string(out.join("report.html")).unwrap();

@@ -118,6 +118,9 @@ pub struct RomoOptions {
     /// Region completion over flow segments (ours; part of refinement).
     #[cfg_attr(feature = "cli", command(flatten))]
     pub regions: RegionOptions,
+    /// Content fixed in the image marked moving (ours; [`crate::overlay`]).
+    #[cfg_attr(feature = "cli", command(flatten))]
+    pub overlay: crate::overlay::OverlayOptions,
     /// Feature extractor (default: the built-in descriptor).
     /// `--onnx-features MODEL`: an ONNX encoder (XFeat layout), concatenated
     /// with the built-in features; needs a build with `--features onnx` and
@@ -169,6 +172,7 @@ impl Default for RomoOptions {
             iterations: 2,
             refine: RefineOptions::default(),
             regions: RegionOptions::default(),
+            overlay: crate::overlay::OverlayOptions::default(),
             features: FeatureBackend::Hand,
             chromaticity_features: true,
             focal_ratio: None,
@@ -204,6 +208,7 @@ impl RomoOptions {
         self.labels.validate()?;
         self.mlp.validate()?;
         self.refine.validate()?;
+        self.overlay.validate()?;
         self.regions.validate()
     }
 
@@ -306,6 +311,11 @@ pub struct RomoReport {
     /// One line per problem the run worked around (skipped pairs, frames
     /// without evidence), for the user.
     pub warnings: Vec<String>,
+    /// Share of the grid marked moving in every frame as content fixed in
+    /// the image ([`crate::overlay`]).
+    pub image_fixed_fraction: f32,
+    /// What the fixed-content test decided, in words.
+    pub image_fixed: String,
 }
 
 /// A pair the pipeline could not use, and why.
@@ -871,6 +881,11 @@ pub fn segment_frames(
     let mut stages = Vec::new();
     let mut planes = refine_grid(planes, &pr, &labels, o, &mut tm, &mut stages);
     keep_frames_without_evidence(&mut planes, &fits, &mut report);
+    if o.overlay.enabled {
+        tm.time("refine", || {
+            mark_image_fixed(&mut planes, &pr, o, &mut report)
+        });
+    }
     report_frames(&labels, &fits, &planes, o, &mut report);
     for (k, v) in timings {
         *report.timings_ms.entry(k).or_default() += v;
@@ -1045,6 +1060,50 @@ fn refine_grid(
         }
     }
     planes
+}
+
+/// Content fixed in the image ([`crate::overlay`]) becomes moving in every
+/// frame; the report says what was decided.
+fn mark_image_fixed(planes: &mut [Plane], pr: &Prepared, o: &RomoOptions, report: &mut RomoReport) {
+    use crate::overlay::{Overlay, image_fixed};
+    let greys: Vec<Plane> = pr.grid_rgb.iter().map(Rgb::gray).collect();
+    match image_fixed(
+        &pr.fwd,
+        &pr.bwd,
+        &pr.valid_f,
+        &pr.textured,
+        &greys,
+        &o.overlay,
+    ) {
+        Overlay::Found(m) => {
+            let k = m.iter().filter(|b| **b).count();
+            report.image_fixed_fraction = k as f32 / m.len().max(1) as f32;
+            report.image_fixed = format!(
+                "{:.2}% of the frame fixed in the image, marked moving",
+                100.0 * report.image_fixed_fraction
+            );
+            for p in planes.iter_mut() {
+                for (v, f) in p.data.iter_mut().zip(&m) {
+                    if *f {
+                        *v = 1.0;
+                    }
+                }
+            }
+        }
+        Overlay::TooLittleMotion { pairs } => {
+            report.image_fixed = format!(
+                "not tested: {pairs} pairs show camera motion, {} needed",
+                o.overlay.min_pairs
+            );
+        }
+        Overlay::TooLarge { fraction } => {
+            report.image_fixed = format!(
+                "nothing marked: {:.0}% of the frame is still, more than an overlay ({:.0}%): taken for distant scene",
+                100.0 * fraction,
+                100.0 * o.overlay.max_area
+            );
+        }
+    }
 }
 
 /// Report the skipped pairs, and keep whole (probability 0) the frames

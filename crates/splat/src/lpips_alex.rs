@@ -37,7 +37,7 @@ pub const WEIGHTS_ENV: &str = "ROMOSPLAT_LPIPS_WEIGHTS";
 pub const GET_WEIGHTS: &str = "python3 scripts/get_lpips_weights.py";
 
 /// Kernel size, stride, padding and max-pool-after of AlexNet conv1..conv5.
-const LAYERS: [(usize, usize, usize, bool); 5] = [
+pub const ALEX_LAYERS: [(usize, usize, usize, bool); 5] = [
     (11, 4, 2, true),
     (5, 1, 2, true),
     (3, 1, 1, false),
@@ -287,7 +287,7 @@ impl LpipsAlex {
         };
         let (mut convs, mut lins) = (Vec::new(), Vec::new());
         let mut c_in = 3;
-        for (i, &(k, ..)) in LAYERS.iter().enumerate() {
+        for (i, &(k, ..)) in ALEX_LAYERS.iter().enumerate() {
             let (ws, w) = get(&format!("conv{i}.weight"))?;
             let (bs, b) = get(&format!("conv{i}.bias"))?;
             let (ls, l) = get(&format!("lin{i}.weight"))?;
@@ -318,7 +318,7 @@ impl LpipsAlex {
     pub fn to_tensors(&self) -> BTreeMap<String, Tensor> {
         let mut t = BTreeMap::new();
         for (i, (c, l)) in self.convs.iter().zip(&self.lins).enumerate() {
-            let k = LAYERS[i].0;
+            let k = ALEX_LAYERS[i].0;
             t.insert(
                 format!("conv{i}.weight"),
                 (vec![k, k, c.c_in, c.c_out], c.w.clone()),
@@ -348,7 +348,7 @@ impl LpipsAlex {
                 .collect(),
         };
         let mut taps = Vec::with_capacity(5);
-        for (conv, &(k, stride, pad, pool)) in self.convs.iter().zip(&LAYERS) {
+        for (conv, &(k, stride, pad, pool)) in self.convs.iter().zip(&ALEX_LAYERS) {
             let t = conv_relu(&x, conv, k, stride, pad);
             x = if pool { max_pool_3x3s2(&t) } else { t.clone() };
             taps.push(t);

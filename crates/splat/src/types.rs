@@ -69,6 +69,24 @@ pub struct RenderCamera {
 }
 
 impl RenderCamera {
+    /// A `width × height` pinhole camera with focal length `f` px and the
+    /// principal point at the image centre, at the origin looking down +z
+    /// (identity pose), clipping at 0.01 and 100.
+    pub fn at_origin(width: u32, height: u32, f: f32) -> Self {
+        RenderCamera {
+            width,
+            height,
+            fx: f,
+            fy: f,
+            cx: width as f32 / 2.0,
+            cy: height as f32 / 2.0,
+            rotation: [[1.0, 0.0, 0.0], [0.0, 1.0, 0.0], [0.0, 0.0, 1.0]],
+            translation: [0.0; 3],
+            near: 0.01,
+            far: 100.0,
+        }
+    }
+
     /// Camera centre in world coordinates.
     pub fn center(&self) -> [f32; 3] {
         let r = &self.rotation;

@@ -9,16 +9,10 @@
 //! - Weights file round trip and one-line errors.
 #![allow(clippy::unwrap_used, clippy::expect_used, clippy::needless_range_loop)]
 
-use splat::lpips_alex::{LpipsAlex, Tensor, WeightsLookup, find_weights, write_safetensors};
+use splat::lpips_alex::{
+    ALEX_LAYERS as LAYERS, LpipsAlex, Tensor, WeightsLookup, find_weights, write_safetensors,
+};
 use std::collections::BTreeMap;
-
-const LAYERS: [(usize, usize, usize, bool); 5] = [
-    (11, 4, 2, true),
-    (5, 1, 2, true),
-    (3, 1, 1, false),
-    (3, 1, 1, false),
-    (3, 1, 1, false),
-];
 
 struct Lcg(u64);
 impl Lcg {

@@ -392,18 +392,7 @@ mod tests {
         let view = View {
             index: 0,
             name: "a".into(),
-            camera: RenderCamera {
-                width: 2,
-                height: 1,
-                fx: 1.0,
-                fy: 1.0,
-                cx: 1.0,
-                cy: 0.5,
-                rotation: [[1.0, 0.0, 0.0], [0.0, 1.0, 0.0], [0.0, 0.0, 1.0]],
-                translation: [0.0; 3],
-                near: 0.01,
-                far: 100.0,
-            },
+            camera: RenderCamera::at_origin(2, 1, 1.0),
             image: vec![0.1, 0.2, 0.3, 0.4, 0.5, 0.6],
             mask: Some(vec![1.0, 0.0]),
         };

@@ -112,6 +112,12 @@ fn segment_with_copy(
     for w in &report.warnings {
         ctx.info(format!("warning: {w}"));
     }
+    if !report.image_fixed.is_empty() {
+        ctx.info(format!(
+            "content fixed in the image: {}",
+            report.image_fixed
+        ));
+    }
     let moving: f32 = report.frames.iter().map(|f| f.moving_fraction).sum::<f32>()
         / report.frames.len().max(1) as f32;
     ctx.info(format!(

@@ -221,7 +221,8 @@ pub struct TrainJob {
 /// without masks compare on the same pixels.
 #[derive(Debug, Clone, serde::Serialize, serde::Deserialize)]
 pub struct StaticScores {
-    /// Held-out views that have a mask (the others count all their pixels).
+    /// Held-out views whose mask leaves out some pixels (the others count
+    /// all their pixels).
     pub masked_views: usize,
     pub mean_psnr: f64,
     pub mean_ssim: f64,
@@ -239,14 +240,20 @@ pub fn scores_line(psnr: f64, ssim: f64, lpips: Option<f64>) -> String {
 }
 
 /// [`StaticScores`] of the held-out `images` (rendered for the all-pixel
-/// scores) against `views` with their masks; `None` when no view has a mask.
+/// scores) against `views` with their masks; `None` when no view's mask
+/// leaves out a pixel.
 fn score_static_pixels(
     views: &[View],
     images: &[Vec<f32>],
     lpips: Option<&mut super::eval_views::Lpips>,
     ctx: &Ctx,
 ) -> anyhow::Result<Option<StaticScores>> {
-    let masked_views = views.iter().filter(|v| v.mask.is_some()).count();
+    // Views whose mask leaves out no pixel score the same as over all
+    // pixels: without any, there is nothing static-only to report.
+    let masked_views = views
+        .iter()
+        .filter(|v| v.mask.as_ref().is_some_and(|m| m.iter().any(|k| *k < 1.0)))
+        .count();
     if masked_views == 0 {
         return Ok(None);
     }
@@ -592,6 +599,30 @@ mod tests {
         Train::try_parse_from(base.iter().chain(extra))
             .unwrap()
             .args
+    }
+
+    #[test]
+    fn static_scores_need_a_mask_that_leaves_out_pixels() {
+        let ctx = Ctx {
+            json: false,
+            quiet: true,
+        };
+        let view = |mask: Option<Vec<f32>>| View {
+            index: 0,
+            name: "v".into(),
+            camera: splat::RenderCamera::at_origin(2, 1, 1.0),
+            image: vec![0.5; 6],
+            mask,
+        };
+        // Rendered: one pixel right, one off by 0.1 in every channel.
+        let images = vec![vec![0.5, 0.5, 0.5, 0.6, 0.6, 0.6]];
+        let score = |v: View| score_static_pixels(&[v], &images, None, &ctx).unwrap();
+        assert!(score(view(None)).is_none());
+        assert!(score(view(Some(vec![1.0, 1.0]))).is_none());
+        // The wrong pixel left out: the static pixels are rendered exactly.
+        let s = score(view(Some(vec![1.0, 0.0]))).unwrap();
+        assert_eq!(s.masked_views, 1);
+        assert!(s.mean_psnr > 60.0, "{}", s.mean_psnr);
     }
 
     #[test]

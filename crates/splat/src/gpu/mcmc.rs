@@ -260,18 +260,7 @@ mod tests {
         for (i, m) in s.means.iter_mut().enumerate() {
             m[2] += if i % 2 == 0 { 4.0 } else { -6.0 };
         }
-        let cam = crate::types::RenderCamera {
-            width: 64,
-            height: 48,
-            fx: 60.0,
-            fy: 60.0,
-            cx: 32.0,
-            cy: 24.0,
-            rotation: [[1.0, 0.0, 0.0], [0.0, 1.0, 0.0], [0.0, 0.0, 1.0]],
-            translation: [0.0; 3],
-            near: 0.01,
-            far: 100.0,
-        };
+        let cam = crate::types::RenderCamera::at_origin(64, 48, 60.0);
         let target: Vec<f32> = (0..64 * 48 * 3).map(|k| (k % 7) as f32 / 7.0).collect();
         let input = StepInput {
             camera: &cam,

@@ -156,16 +156,8 @@ fn validate_rejects_bad_screen_threshold() {
 /// A 64×64 camera at the origin looking down +z (near 0.1, far 100).
 fn front_camera() -> crate::types::RenderCamera {
     crate::types::RenderCamera {
-        width: 64,
-        height: 64,
-        fx: 64.0,
-        fy: 64.0,
-        cx: 32.0,
-        cy: 32.0,
-        rotation: [[1.0, 0.0, 0.0], [0.0, 1.0, 0.0], [0.0, 0.0, 1.0]],
-        translation: [0.0; 3],
         near: 0.1,
-        far: 100.0,
+        ..crate::types::RenderCamera::at_origin(64, 64, 64.0)
     }
 }
 

@@ -12,18 +12,7 @@ use splat::{RenderCamera, Splats};
 
 /// A camera at the origin looking down +z (identity pose).
 pub fn camera(w: u32, h: u32, f: f32) -> RenderCamera {
-    RenderCamera {
-        width: w,
-        height: h,
-        fx: f,
-        fy: f,
-        cx: w as f32 / 2.0,
-        cy: h as f32 / 2.0,
-        rotation: [[1.0, 0.0, 0.0], [0.0, 1.0, 0.0], [0.0, 0.0, 1.0]],
-        translation: [0.0; 3],
-        near: 0.01,
-        far: 100.0,
-    }
+    RenderCamera::at_origin(w, h, f)
 }
 
 /// A camera with a generic rotation and translation looking at the origin region.
