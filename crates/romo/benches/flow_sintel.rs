@@ -226,18 +226,7 @@ fn main() {
         .and_then(|s| s.parse().ok())
         .unwrap_or(5)
         .max(1);
-    let opts: DisOptions = match std::env::var("DIS_OPTS") {
-        Ok(s) => match serde_json::from_str(&s) {
-            Ok(o) => o,
-            Err(e) => {
-                eprintln!("DIS_OPTS: not a DisOptions JSON ({e})");
-                std::process::exit(2);
-            }
-        },
-        Err(_) if std::env::var("PRESET").as_deref() == Ok("large") => DisOptions::large_motion(),
-        Err(_) if std::env::var("PRESET").as_deref() == Ok("masks") => DisOptions::masks(),
-        Err(_) => DisOptions::opencv_medium(),
-    };
+    let opts = options_from_env();
     let filter: Vec<String> = std::env::var("PAIRS")
         .map(|s| s.split(',').map(String::from).collect())
         .unwrap_or_default();
@@ -323,7 +312,42 @@ fn main() {
         eprintln!("{row}");
         rows.push(row);
     }
-    let mean = |small: bool, get: &dyn Fn(&Value) -> Option<f64>| {
+    let out = json!({
+        "method": "romo DIS vs OpenCV DIS MEDIUM (interleaved, per-pair medians, means over pairs)",
+        "options": opts, "threads": rayon::current_num_threads(), "reps": reps,
+        "simd": if romo::flow::simd::avx2_active() { "avx2" } else { "baseline" },
+        "opencv": match &cv { Ok(c) => json!({"available": true, "version": c.version, "threads": 2}),
+                              Err(e) => json!({"available": false, "reason": e}) },
+        "small": summary(&rows, &onnx, true), "large": summary(&rows, &onnx, false),
+        "pairs": rows,
+    });
+    if let Ok(c) = cv {
+        c.stop();
+    }
+    println!("{}", serde_json::to_string_pretty(&out).unwrap());
+}
+
+/// `DIS_OPTS` (a `DisOptions` JSON) or `PRESET` (`large`, `masks`), else
+/// OpenCV's MEDIUM preset.
+fn options_from_env() -> DisOptions {
+    match std::env::var("DIS_OPTS") {
+        Ok(s) => match serde_json::from_str(&s) {
+            Ok(o) => o,
+            Err(e) => {
+                eprintln!("DIS_OPTS: not a DisOptions JSON ({e})");
+                std::process::exit(2);
+            }
+        },
+        Err(_) if std::env::var("PRESET").as_deref() == Ok("large") => DisOptions::large_motion(),
+        Err(_) if std::env::var("PRESET").as_deref() == Ok("masks") => DisOptions::masks(),
+        Err(_) => DisOptions::opencv_medium(),
+    }
+}
+
+/// Means over the small- (or large-) motion pairs' rows: EPE and time of
+/// ours, OpenCV's and each ONNX model's, the SIMD speed-up, stage times.
+fn summary(rows: &[Value], onnx: &[(String, Box<dyn FlowEstimator>)], small: bool) -> Value {
+    let mean = |get: &dyn Fn(&Value) -> Option<f64>| {
         let v: Vec<f64> = rows
             .iter()
             .filter(|r| r["small_motion"] == small)
@@ -331,48 +355,33 @@ fn main() {
             .collect();
         (!v.is_empty()).then(|| v.iter().sum::<f64>() / v.len() as f64)
     };
-    let summary = |small: bool| {
-        let ours_ms = mean(small, &|r| r["ms_median"].as_f64());
-        let cv_ms = mean(small, &|r| r["opencv"]["ms_median"].as_f64());
-        let base_ms = mean(small, &|r| r["baseline_ms_median"].as_f64());
-        let mut stages = serde_json::Map::new();
-        if let Some(first) = rows.iter().find(|r| r["small_motion"] == small) {
-            for k in first["stages_ms"].as_object().unwrap().keys() {
-                let v = mean(small, &|r| r["stages_ms"][k].as_f64());
-                stages.insert(k.clone(), json!(v));
-            }
+    let ours_ms = mean(&|r| r["ms_median"].as_f64());
+    let cv_ms = mean(&|r| r["opencv"]["ms_median"].as_f64());
+    let base_ms = mean(&|r| r["baseline_ms_median"].as_f64());
+    let mut stages = serde_json::Map::new();
+    if let Some(first) = rows.iter().find(|r| r["small_motion"] == small) {
+        for k in first["stages_ms"].as_object().unwrap().keys() {
+            let v = mean(&|r| r["stages_ms"][k].as_f64());
+            stages.insert(k.clone(), json!(v));
         }
-        let mut onnx_summary = serde_json::Map::new();
-        for (name, _) in &onnx {
-            let get = |k: &'static str| mean(small, &|r| r["onnx"][name.as_str()][k].as_f64());
-            onnx_summary.insert(
-                name.clone(),
-                json!({"epe_all": get("epe_all"), "epe_noc": get("epe_noc"), "ms": get("ms")}),
-            );
-        }
-        json!({
-            "onnx": onnx_summary,
-            "romo": {"epe_all": mean(small, &|r| r["epe_all"].as_f64()),
-                     "epe_noc": mean(small, &|r| r["epe_noc"].as_f64()), "ms": ours_ms},
-            "opencv": {"epe_all": mean(small, &|r| r["opencv"]["epe_all"].as_f64()),
-                       "epe_noc": mean(small, &|r| r["opencv"]["epe_noc"].as_f64()), "ms": cv_ms},
-            "ratio": ours_ms.zip(cv_ms).map(|(a, b)| a / b),
-            "baseline_ms": base_ms,
-            "simd_speedup": base_ms.zip(ours_ms).map(|(a, b)| a / b),
-            "romo_stages_ms": stages,
-        })
-    };
-    let out = json!({
-        "method": "romo DIS vs OpenCV DIS MEDIUM (interleaved, per-pair medians, means over pairs)",
-        "options": opts, "threads": rayon::current_num_threads(), "reps": reps,
-        "simd": if romo::flow::simd::avx2_active() { "avx2" } else { "baseline" },
-        "opencv": match &cv { Ok(c) => json!({"available": true, "version": c.version, "threads": 2}),
-                              Err(e) => json!({"available": false, "reason": e}) },
-        "small": summary(true), "large": summary(false),
-        "pairs": rows,
-    });
-    if let Ok(c) = cv {
-        c.stop();
     }
-    println!("{}", serde_json::to_string_pretty(&out).unwrap());
+    let mut onnx_summary = serde_json::Map::new();
+    for (name, _) in onnx {
+        let get = |k: &'static str| mean(&|r| r["onnx"][name.as_str()][k].as_f64());
+        onnx_summary.insert(
+            name.clone(),
+            json!({"epe_all": get("epe_all"), "epe_noc": get("epe_noc"), "ms": get("ms")}),
+        );
+    }
+    json!({
+        "onnx": onnx_summary,
+        "romo": {"epe_all": mean(&|r| r["epe_all"].as_f64()),
+                 "epe_noc": mean(&|r| r["epe_noc"].as_f64()), "ms": ours_ms},
+        "opencv": {"epe_all": mean(&|r| r["opencv"]["epe_all"].as_f64()),
+                   "epe_noc": mean(&|r| r["opencv"]["epe_noc"].as_f64()), "ms": cv_ms},
+        "ratio": ours_ms.zip(cv_ms).map(|(a, b)| a / b),
+        "baseline_ms": base_ms,
+        "simd_speedup": base_ms.zip(ours_ms).map(|(a, b)| a / b),
+        "romo_stages_ms": stages,
+    })
 }

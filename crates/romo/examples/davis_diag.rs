@@ -81,22 +81,7 @@ fn run() -> Res<()> {
         let fx = romo::scene::make_extractor(&opts)?;
         let flow = romo::flow::dis::Dis::new(opts.flow.clone());
         let t = std::time::Instant::now();
-        // The ground truth (0 / 1) of every frame, at full resolution.
-        let gts: Vec<Plane> = frames
-            .iter()
-            .map(|f| -> Res<Plane> {
-                let a = f
-                    .annotation
-                    .as_ref()
-                    .ok_or_else(|| format!("{s}/{}: no annotation", f.name))?;
-                let g = loader::io::read_gray8(a)?;
-                Ok(Plane {
-                    w: g.width() as usize,
-                    h: g.height() as usize,
-                    data: g.as_raw().iter().map(|v| (*v > 127) as u8 as f32).collect(),
-                })
-            })
-            .collect::<Res<_>>()?;
+        let gts = ground_truth(&s, &frames)?;
         let seg = romo::segment_frames(&src, &opts, &flow, fx.as_ref(), &|_, _, _| {})?;
         let secs = t.elapsed().as_secs_f64();
         let (gw, gh) = seg.report.grid;
@@ -137,21 +122,7 @@ fn run() -> Res<()> {
                 &gt_grid,
             );
             if std::env::var_os("PERFRAME").is_some() {
-                let mut row = Vec::new();
-                let mut one = |name: &str, pred: &[bool]| {
-                    let mut c = Counts::default();
-                    c.add(pred, &gt_grid);
-                    row.push(format!("{name} {:.2}/{:.2}", c.p(), c.r()));
-                };
-                one("U", &seg.u[i]);
-                one("notL", &seg.l[i].iter().map(|b| !b).collect::<Vec<_>>());
-                for (name, st) in &seg.stages {
-                    one(
-                        name,
-                        &st[i].data.iter().map(|v| *v > thr).collect::<Vec<_>>(),
-                    );
-                }
-                eprintln!("{s} {i:3} P/R {}", row.join(" "));
+                eprintln!("{s} {i:3} P/R {}", frame_line(&seg, i, &gt_grid, thr));
             }
             for (c, (_, st)) in sc.iter_mut().zip(&seg.stages) {
                 c.add(
@@ -169,25 +140,7 @@ fn run() -> Res<()> {
             if let Ok(d) = std::env::var("DUMP")
                 && i % 10 == 0
             {
-                // frame | U (red) / L (green) | probability | ground truth
-                let small = frame.resize(gw, gh);
-                let img = image::RgbImage::from_fn(4 * gw as u32, gh as u32, |x, y| {
-                    let (k, x) = (x as usize / gw, x as usize % gw);
-                    let j = y as usize * gw + x;
-                    let b = |v: f32| (v.clamp(0.0, 1.0) * 255.0) as u8;
-                    match k {
-                        0 => image::Rgb([
-                            b(small.c[0].data[j]),
-                            b(small.c[1].data[j]),
-                            b(small.c[2].data[j]),
-                        ]),
-                        1 => image::Rgb([255 * seg.u[i][j] as u8, 255 * seg.l[i][j] as u8, 0]),
-                        2 => image::Rgb([b(seg.probs[i].data[j]); 3]),
-                        _ => image::Rgb([255 * gt_grid[j] as u8; 3]),
-                    }
-                });
-                std::fs::create_dir_all(&d)?;
-                img.save(format!("{d}/{s}_{i:03}.png"))?;
+                dump(&d, &s, i, &frame, &seg, &gt_grid)?;
             }
             let full = romo::refine::upsample_probability(&seg.probs[i], &frame, &opts.refine);
             fc.add(
@@ -242,5 +195,76 @@ fn run() -> Res<()> {
         sums[2] / k,
         sums[3] / k
     );
+    Ok(())
+}
+
+/// The ground truth (0 / 1) of every frame of sequence `s`, at full
+/// resolution.
+fn ground_truth(s: &str, frames: &[loader::davis::DavisFrame]) -> Res<Vec<Plane>> {
+    frames
+        .iter()
+        .map(|f| -> Res<Plane> {
+            let a = f
+                .annotation
+                .as_ref()
+                .ok_or_else(|| format!("{s}/{}: no annotation", f.name))?;
+            let g = loader::io::read_gray8(a)?;
+            Ok(Plane {
+                w: g.width() as usize,
+                h: g.height() as usize,
+                data: g.as_raw().iter().map(|v| (*v > 127) as u8 as f32).collect(),
+            })
+        })
+        .collect()
+}
+
+/// Precision / recall of frame `i`'s U, not-L and every recorded stage.
+fn frame_line(seg: &romo::Segmentation, i: usize, gt_grid: &[bool], thr: f32) -> String {
+    let mut row = Vec::new();
+    let mut one = |name: &str, pred: &[bool]| {
+        let mut c = Counts::default();
+        c.add(pred, gt_grid);
+        row.push(format!("{name} {:.2}/{:.2}", c.p(), c.r()));
+    };
+    one("U", &seg.u[i]);
+    one("notL", &seg.l[i].iter().map(|b| !b).collect::<Vec<_>>());
+    for (name, st) in &seg.stages {
+        one(
+            name,
+            &st[i].data.iter().map(|v| *v > thr).collect::<Vec<_>>(),
+        );
+    }
+    row.join(" ")
+}
+
+/// `DIR/<seq>_<i>.png`: frame | U (red) / L (green) | probability | ground
+/// truth, on the grid.
+fn dump(
+    d: &str,
+    s: &str,
+    i: usize,
+    frame: &Rgb,
+    seg: &romo::Segmentation,
+    gt_grid: &[bool],
+) -> Res<()> {
+    let (gw, gh) = seg.report.grid;
+    let small = frame.resize(gw, gh);
+    let img = image::RgbImage::from_fn(4 * gw as u32, gh as u32, |x, y| {
+        let (k, x) = (x as usize / gw, x as usize % gw);
+        let j = y as usize * gw + x;
+        let b = |v: f32| (v.clamp(0.0, 1.0) * 255.0) as u8;
+        match k {
+            0 => image::Rgb([
+                b(small.c[0].data[j]),
+                b(small.c[1].data[j]),
+                b(small.c[2].data[j]),
+            ]),
+            1 => image::Rgb([255 * seg.u[i][j] as u8, 255 * seg.l[i][j] as u8, 0]),
+            2 => image::Rgb([b(seg.probs[i].data[j]); 3]),
+            _ => image::Rgb([255 * gt_grid[j] as u8; 3]),
+        }
+    });
+    std::fs::create_dir_all(d)?;
+    img.save(format!("{d}/{s}_{i:03}.png"))?;
     Ok(())
 }
