@@ -27,6 +27,7 @@
 //! that only translates, and nothing is marked either (overlays are small).
 
 use crate::flow::Flow;
+use crate::geometry::robust::median;
 use crate::plane::Plane;
 use serde::{Deserialize, Serialize};
 
@@ -112,15 +113,6 @@ pub enum Overlay {
     TooLarge { fraction: f32 },
 }
 
-/// Median of `v` (destroys its order); 0 when empty.
-fn median(v: &mut [f32]) -> f32 {
-    if v.is_empty() {
-        return 0.0;
-    }
-    let k = v.len() / 2;
-    *v.select_nth_unstable_by(k, f32::total_cmp).1
-}
-
 /// Content fixed in the image over the video (module docs). `fwd[p]` /
 /// `bwd[p]` are pair p's flows on the grid, `valid_f[p]` its
 /// cycle-consistent pixels, `textured[t]` frame t's textured pixels and
@@ -141,12 +133,12 @@ pub fn image_fixed(
     let moving_pairs: Vec<usize> = (0..fwd.len())
         .filter(|&p| {
             let f = &fwd[p];
-            let mut mags: Vec<f32> = (0..n)
+            let mut mags: Vec<f64> = (0..n)
                 .filter(|&i| valid_f[p][i] && textured[p][i])
-                .map(|i| f.u.data[i].hypot(f.v.data[i]))
+                .map(|i| f64::from(f.u.data[i].hypot(f.v.data[i])))
                 .collect();
             // Too few correspondences to say how the camera moved.
-            mags.len() * 20 >= n && median(&mut mags) >= o.min_camera_flow
+            mags.len() * 20 >= n && median(&mut mags) >= f64::from(o.min_camera_flow)
         })
         .collect();
     if moving_pairs.len() < o.min_pairs.max(1) {

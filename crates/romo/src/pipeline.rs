@@ -369,6 +369,8 @@ struct Prepared {
     textured: Vec<Vec<bool>>,
     /// Frames at the grid's size (object refinement).
     grid_rgb: Vec<Rgb>,
+    /// Their grey levels (fixed-content test).
+    grid_grays: Vec<Plane>,
     /// Per frame: pixels textured enough for the object refinement's
     /// geometric evidence (`refine.objects.texture_gradient`).
     evidence_textured: Vec<Vec<bool>>,
@@ -611,6 +613,7 @@ fn prepare(
         grid_focal,
         textured,
         grid_rgb,
+        grid_grays,
         evidence_textured,
         unusable,
     })
@@ -1066,13 +1069,12 @@ fn refine_grid(
 /// frame; the report says what was decided.
 fn mark_image_fixed(planes: &mut [Plane], pr: &Prepared, o: &RomoOptions, report: &mut RomoReport) {
     use crate::overlay::{Overlay, image_fixed};
-    let greys: Vec<Plane> = pr.grid_rgb.iter().map(Rgb::gray).collect();
     match image_fixed(
         &pr.fwd,
         &pr.bwd,
         &pr.valid_f,
         &pr.textured,
-        &greys,
+        &pr.grid_grays,
         &o.overlay,
     ) {
         Overlay::Found(m) => {

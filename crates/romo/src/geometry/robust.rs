@@ -182,7 +182,8 @@ struct Fit {
     inliers: usize,
 }
 
-fn median(v: &mut [f64]) -> f64 {
+/// Median of `v` (reorders it); infinite when empty.
+pub(crate) fn median(v: &mut [f64]) -> f64 {
     if v.is_empty() {
         return f64::INFINITY;
     }
