@@ -4,12 +4,7 @@ mod common;
 use libfuzzer_sys::fuzz_target;
 
 fuzz_target!(|data: &[u8]| {
-    let dir = common::scratch().join("bin");
-    let _ = std::fs::create_dir_all(&dir);
-    let parts = common::split_parts(data, 3);
-    for (name, bytes) in ["cameras.bin", "images.bin", "points3D.bin"].iter().zip(&parts) {
-        std::fs::write(dir.join(name), bytes).expect("scratch write");
-    }
+    let dir = common::write_parts(data, "bin", &["cameras.bin", "images.bin", "points3D.bin"]);
     if let Ok(m) = loader::colmap::read_model_binary(&dir) {
         // What reads must write back and read again identically.
         let out = dir.join("again");

@@ -1,6 +1,6 @@
 //! Shared helpers: a per-process scratch folder in /dev/shm (or the temp
 //! folder) for the readers that take paths, and splitting one input into
-//! several files.
+//! several files written there.
 #![allow(dead_code)]
 
 use std::path::PathBuf;
@@ -37,4 +37,15 @@ pub fn split_parts(data: &[u8], n: usize) -> Vec<&[u8]> {
         parts.push(&[]);
     }
     parts
+}
+
+/// Split `data` as [`split_parts`] does into one part per name and write
+/// each as `scratch()/sub/<name>`; returns that folder.
+pub fn write_parts(data: &[u8], sub: &str, names: &[&str]) -> PathBuf {
+    let dir = scratch().join(sub);
+    let _ = std::fs::create_dir_all(&dir);
+    for (name, bytes) in names.iter().zip(split_parts(data, names.len())) {
+        std::fs::write(dir.join(name), bytes).expect("scratch write");
+    }
+    dir
 }

@@ -128,11 +128,11 @@ fn check_registration(r: &Run) {
     assert_eq!(rep.registered, rep.total, "left out: {:?}", rep.left_out);
     assert!(rep.left_out.is_empty());
     assert!(rep.total >= 30, "{}", rep.total);
-    assert!(rep.points > 500, "{} points", rep.points);
+    assert!(rep.model.points > 500, "{} points", rep.model.points);
     assert!(
-        rep.mean_reprojection_error < 1.5,
+        rep.model.mean_reprojection_error < 1.5,
         "{}",
-        rep.mean_reprojection_error
+        rep.model.mean_reprojection_error
     );
     let pred = read_model_binary(&r.paths.out).unwrap();
     let gt = loader::colmap::read_model(r.scene.join("sparse/0")).unwrap();

@@ -452,14 +452,7 @@ pub fn probe_step_seconds(
     use splat::train::TrainOptions;
     use splat::types::{RenderCamera, RenderOptions, Splats};
     let coeffs = 16;
-    let mut s = Splats {
-        means: Vec::with_capacity(splats),
-        log_scales: Vec::with_capacity(splats),
-        rotations: Vec::with_capacity(splats),
-        opacity_logits: Vec::with_capacity(splats),
-        sh: vec![0.0; splats * coeffs * 3],
-        sh_degree: 3,
-    };
+    let mut s = Splats::with_capacity(splats, 3);
     // A deterministic low-discrepancy cloud filling the view at depth 2–6.
     for i in 0..splats {
         let f = i as f32;

@@ -356,15 +356,9 @@ pub struct ColmapReport {
     pub models_found: usize,
     /// Registered images of every model, largest first.
     pub model_sizes: Vec<usize>,
-    /// 3D points in the kept model.
-    pub points: usize,
-    /// Mean reprojection error of the points, pixels.
-    pub mean_reprojection_error: f64,
-    /// Mean track length (observations per point).
-    pub mean_track_length: f64,
-    /// Camera model and parameters COLMAP estimated (first camera).
-    pub camera_model: String,
-    pub camera_params: Vec<f64>,
+    /// The kept model's points and the camera COLMAP estimated.
+    #[serde(flatten)]
+    pub model: crate::model_info::ModelStats,
     /// Whether masks were passed to COLMAP.
     pub used_masks: bool,
     /// Matcher used.
@@ -679,7 +673,7 @@ pub fn run_colmap_cancellable(
     models.sort_by_key(|(m, _)| {
         (
             std::cmp::Reverse(m.registered()),
-            std::cmp::Reverse(m.points),
+            std::cmp::Reverse(m.stats.points),
         )
     });
     let model_sizes: Vec<usize> = models.iter().map(|(m, _)| m.registered()).collect();
@@ -705,11 +699,7 @@ pub fn run_colmap_cancellable(
         left_out,
         models_found: model_sizes.len(),
         model_sizes,
-        points: best.points,
-        mean_reprojection_error: best.mean_reprojection_error,
-        mean_track_length: best.mean_track_length,
-        camera_model: best.camera_model.clone(),
-        camera_params: best.camera_params.clone(),
+        model: best.stats.clone(),
         used_masks: opts.use_masks,
         matcher: opts.matcher,
         model_dir: paths.out.clone(),

@@ -5,24 +5,32 @@
 
 use crate::error::{PoseError, Result};
 use loader::colmap::{ColmapModel, read_model};
+use serde::{Deserialize, Serialize};
 use std::path::Path;
 
-/// What the pose stage reports about a model.
-#[derive(Debug, Clone, PartialEq)]
-pub struct ModelInfo {
-    /// Registered image names, sorted.
-    pub image_names: Vec<String>,
+/// A model's points and first camera, as the pose stage reports them
+/// (also flattened into [`crate::colmap_runner::ColmapReport`]).
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+pub struct ModelStats {
     /// Number of 3D points.
     pub points: usize,
     /// Mean of the points' reprojection errors, pixels (COLMAP's
     /// `ComputeMeanReprojectionError`; points with unknown error skipped).
     pub mean_reprojection_error: f64,
-    /// Mean track length.
+    /// Mean track length (observations per point).
     pub mean_track_length: f64,
     /// Model name of the first camera.
     pub camera_model: String,
     /// Parameters of the first camera.
     pub camera_params: Vec<f64>,
+}
+
+/// What the pose stage knows about a model.
+#[derive(Debug, Clone, PartialEq)]
+pub struct ModelInfo {
+    /// Registered image names, sorted.
+    pub image_names: Vec<String>,
+    pub stats: ModelStats,
     /// Whether any camera has non-zero distortion.
     pub has_distortion: bool,
 }
@@ -62,13 +70,15 @@ pub fn model_info(model: &ColmapModel) -> ModelInfo {
     let first = model.cameras.values().next();
     ModelInfo {
         image_names,
-        points: model.points3d.len(),
-        mean_reprojection_error,
-        mean_track_length,
-        camera_model: first
-            .map(|c| c.model.name().to_string())
-            .unwrap_or_default(),
-        camera_params: first.map(|c| c.params.clone()).unwrap_or_default(),
+        stats: ModelStats {
+            points: model.points3d.len(),
+            mean_reprojection_error,
+            mean_track_length,
+            camera_model: first
+                .map(|c| c.model.name().to_string())
+                .unwrap_or_default(),
+            camera_params: first.map(|c| c.params.clone()).unwrap_or_default(),
+        },
         has_distortion: model.cameras.values().any(|c| !c.is_pinhole()),
     }
 }

@@ -35,6 +35,19 @@ pub struct Splats {
 }
 
 impl Splats {
+    /// No splats yet, with room for `n` and the SH coefficients of `n`
+    /// splats of `sh_degree` already zeroed (the per-splat vectors are
+    /// pushed to; `sh` is written in place).
+    pub fn with_capacity(n: usize, sh_degree: u32) -> Self {
+        Self {
+            means: Vec::with_capacity(n),
+            log_scales: Vec::with_capacity(n),
+            rotations: Vec::with_capacity(n),
+            opacity_logits: Vec::with_capacity(n),
+            sh: vec![0.0; n * sh_coeffs(sh_degree) * 3],
+            sh_degree,
+        }
+    }
     /// Number of splats.
     pub fn len(&self) -> usize {
         self.means.len()

@@ -255,8 +255,8 @@ pub fn colmap(
         "registered {}/{} images, {} points, mean reprojection error {:.3} px, {:.1} s; model in {}",
         report.registered,
         report.total,
-        report.points,
-        report.mean_reprojection_error,
+        report.model.points,
+        report.model.mean_reprojection_error,
         report.total_seconds,
         report.model_dir.display()
     ));

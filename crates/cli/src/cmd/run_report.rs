@@ -73,8 +73,8 @@ pub fn write_report(plan: &Plan, r: &Results) -> Result<()> {
             rows: vec![vec![
                 p.registered.to_string(),
                 p.total.to_string(),
-                p.points.to_string(),
-                format!("{:.3}", p.mean_reprojection_error),
+                p.model.points.to_string(),
+                format!("{:.3}", p.model.mean_reprojection_error),
             ]],
         });
     }

@@ -320,14 +320,7 @@ pub fn decode_spz(bytes: &[u8], convert_axes: bool) -> Result<(SpzHeader, Splats
             raw.len()
         )));
     }
-    let mut s = Splats {
-        means: Vec::with_capacity(n),
-        log_scales: Vec::with_capacity(n),
-        rotations: Vec::with_capacity(n),
-        opacity_logits: Vec::with_capacity(n),
-        sh: vec![0.0; n * k * 3],
-        sh_degree: u32::from(header.sh_degree),
-    };
+    let mut s = Splats::with_capacity(n, u32::from(header.sh_degree));
     let mut o = 16;
     let inv = 1.0 / (1u32 << header.fractional_bits) as f32;
     for _ in 0..n {
