@@ -118,12 +118,31 @@ impl<'a> Cursor<'a> {
     }
 }
 
-fn read_cameras(path: &Path) -> Result<Records<u32, Camera>> {
+/// Read a binary record file of `what`s: a u64 count (`count`, checked
+/// against the bytes left at `min_record` bytes a record), then that many
+/// records, each read by `record` as (id, value) and kept in file order;
+/// nothing may follow.
+fn read_records<K: Ord + Copy + std::fmt::Display, V>(
+    path: &Path,
+    what: &str,
+    count: &str,
+    min_record: usize,
+    mut record: impl FnMut(&mut Cursor) -> Result<(K, V)>,
+) -> Result<Records<K, V>> {
     let buf = read_bytes(path)?;
     let mut c = Cursor::new(&buf, path);
-    let n = c.count("number of cameras", 24)?;
+    let n = c.count(count, min_record)?;
     let mut records = Records::with_capacity(n);
     for _ in 0..n {
+        let (id, v) = record(&mut c)?;
+        records.insert(path, None, what, id, v)?;
+    }
+    c.finish()?;
+    Ok(records)
+}
+
+fn read_cameras(path: &Path) -> Result<Records<u32, Camera>> {
+    read_records(path, "camera", "number of cameras", 24, |c| {
         let id = c.u32("camera id")?;
         let model_id = c.i32("camera model id")?;
         let model = CameraModel::from_id(model_id).ok_or_else(|| {
@@ -134,29 +153,24 @@ fn read_cameras(path: &Path) -> Result<Records<u32, Camera>> {
         })?;
         let width = c.u64("camera width")?;
         let height = c.u64("camera height")?;
-        let mut params = Vec::with_capacity(model.num_params());
-        for _ in 0..model.num_params() {
-            params.push(c.f64("camera params")?);
-        }
-        let record = Camera {
+        let params = (0..model.num_params())
+            .map(|_| c.f64("camera params"))
+            .collect::<Result<Vec<f64>>>()?;
+        Ok((
             id,
-            model,
-            width,
-            height,
-            params,
-        };
-        records.insert(path, None, "camera", id, record)?;
-    }
-    c.finish()?;
-    Ok(records)
+            Camera {
+                id,
+                model,
+                width,
+                height,
+                params,
+            },
+        ))
+    })
 }
 
 fn read_images(path: &Path) -> Result<Records<u32, ColmapImage>> {
-    let buf = read_bytes(path)?;
-    let mut c = Cursor::new(&buf, path);
-    let n = c.count("number of images", 4 + 56 + 4 + 1 + 8)?;
-    let mut records = Records::with_capacity(n);
-    for _ in 0..n {
+    read_records(path, "image", "number of images", 4 + 56 + 4 + 1 + 8, |c| {
         let id = c.u32("image id")?;
         let qvec = c.f64s::<4>("image qvec")?;
         let tvec = c.f64s::<3>("image tvec")?;
@@ -172,49 +186,51 @@ fn read_images(path: &Path) -> Result<Records<u32, ColmapImage>> {
                 point3d_id: (pid != INVALID_POINT3D).then_some(pid),
             });
         }
-        let im = ColmapImage {
+        let pose = Pose { qvec, tvec };
+        Ok((
             id,
-            pose: Pose { qvec, tvec },
-            camera_id,
-            name,
-            points2d,
-        };
-        records.insert(path, None, "image", id, im)?;
-    }
-    c.finish()?;
-    Ok(records)
+            ColmapImage {
+                id,
+                pose,
+                camera_id,
+                name,
+                points2d,
+            },
+        ))
+    })
 }
 
 fn read_points(path: &Path) -> Result<Records<u64, Point3D>> {
-    let buf = read_bytes(path)?;
-    let mut c = Cursor::new(&buf, path);
-    let n = c.count("number of points3D", 8 + 24 + 3 + 8 + 8)?;
-    let mut records = Records::with_capacity(n);
-    for _ in 0..n {
-        let id = c.u64("point3D id")?;
-        let xyz = c.f64s::<3>("point3D xyz")?;
-        let rgb = [
-            c.u8("point3D rgb")?,
-            c.u8("point3D rgb")?,
-            c.u8("point3D rgb")?,
-        ];
-        let error = c.f64("point3D error")?;
-        let nt = c.count("track length", 8)?;
-        let mut track = Vec::with_capacity(nt);
-        for _ in 0..nt {
-            track.push((c.u32("track image id")?, c.u32("track point2D idx")?));
-        }
-        let record = Point3D {
-            id,
-            xyz,
-            rgb,
-            error,
-            track,
-        };
-        records.insert(path, None, "point3D", id, record)?;
-    }
-    c.finish()?;
-    Ok(records)
+    read_records(
+        path,
+        "point3D",
+        "number of points3D",
+        8 + 24 + 3 + 8 + 8,
+        |c| {
+            let id = c.u64("point3D id")?;
+            let xyz = c.f64s::<3>("point3D xyz")?;
+            let rgb = [
+                c.u8("point3D rgb")?,
+                c.u8("point3D rgb")?,
+                c.u8("point3D rgb")?,
+            ];
+            let error = c.f64("point3D error")?;
+            let nt = c.count("track length", 8)?;
+            let track = (0..nt)
+                .map(|_| Ok((c.u32("track image id")?, c.u32("track point2D idx")?)))
+                .collect::<Result<Vec<(u32, u32)>>>()?;
+            Ok((
+                id,
+                Point3D {
+                    id,
+                    xyz,
+                    rgb,
+                    error,
+                    track,
+                },
+            ))
+        },
+    )
 }
 
 /// Read `cameras.bin`, `images.bin` and `points3D.bin` from `dir`.

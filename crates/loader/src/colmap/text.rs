@@ -24,12 +24,25 @@ fn is_data(line: &str) -> bool {
     !t.is_empty() && !t.starts_with('#')
 }
 
-fn read_cameras(path: &Path) -> Result<Records<u32, Camera>> {
+/// Read a text record file with one `what` per data line (comments and
+/// blank lines skipped): `record` parses a line's tokens, given its
+/// 1-based number, into (id, value); records keep file order.
+fn read_line_records<K: Ord + Copy + std::fmt::Display, V>(
+    path: &Path,
+    what: &str,
+    mut record: impl FnMut(usize, std::str::SplitWhitespace) -> Result<(K, V)>,
+) -> Result<Records<K, V>> {
     let text = read_string(path)?;
     let mut records = Records::with_capacity(0);
     for (i, line) in text.lines().enumerate().filter(|(_, l)| is_data(l)) {
-        let ln = i + 1;
-        let mut it = line.split_whitespace();
+        let (id, v) = record(i + 1, line.split_whitespace())?;
+        records.insert(path, Some(i + 1), what, id, v)?;
+    }
+    Ok(records)
+}
+
+fn read_cameras(path: &Path) -> Result<Records<u32, Camera>> {
+    read_line_records(path, "camera", |ln, mut it| {
         let id: u32 = parse(path, ln, "camera id", it.next())?;
         let name = it.next().unwrap_or("");
         let model = CameraModel::from_name(name)
@@ -53,16 +66,17 @@ fn read_cameras(path: &Path) -> Result<Records<u32, Camera>> {
                 ),
             ));
         }
-        let record = Camera {
+        Ok((
             id,
-            model,
-            width,
-            height,
-            params,
-        };
-        records.insert(path, Some(ln), "camera", id, record)?;
-    }
-    Ok(records)
+            Camera {
+                id,
+                model,
+                width,
+                height,
+                params,
+            },
+        ))
+    })
 }
 
 fn read_images(path: &Path) -> Result<Records<u32, ColmapImage>> {
@@ -115,24 +129,20 @@ fn read_images(path: &Path) -> Result<Records<u32, ColmapImage>> {
             qvec: [v[0], v[1], v[2], v[3]],
             tvec: [v[4], v[5], v[6]],
         };
-        let record = ColmapImage {
+        let image = ColmapImage {
             id,
             pose,
             camera_id,
             name,
             points2d,
         };
-        records.insert(path, Some(ln), "image", id, record)?;
+        records.insert(path, Some(ln), "image", id, image)?;
     }
     Ok(records)
 }
 
 fn read_points(path: &Path) -> Result<Records<u64, Point3D>> {
-    let text = read_string(path)?;
-    let mut records = Records::with_capacity(0);
-    for (i, line) in text.lines().enumerate().filter(|(_, l)| is_data(l)) {
-        let ln = i + 1;
-        let mut it = line.split_whitespace();
+    read_line_records(path, "point3D", |ln, mut it| {
         let id: u64 = parse(path, ln, "point3D id", it.next())?;
         let mut xyz = [0.0; 3];
         for x in &mut xyz {
@@ -159,16 +169,17 @@ fn read_points(path: &Path) -> Result<Records<u64, Point3D>> {
                 ))
             })
             .collect::<Result<Vec<(u32, u32)>>>()?;
-        let record = Point3D {
+        Ok((
             id,
-            xyz,
-            rgb,
-            error,
-            track,
-        };
-        records.insert(path, Some(ln), "point3D", id, record)?;
-    }
-    Ok(records)
+            Point3D {
+                id,
+                xyz,
+                rgb,
+                error,
+                track,
+            },
+        ))
+    })
 }
 
 /// Read `cameras.txt`, `images.txt` and `points3D.txt` from `dir`.
