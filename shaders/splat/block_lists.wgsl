@@ -41,3 +41,40 @@ fn compact_block_lists(lid: u32, f0: u32, f1: u32, lists: u32) {
     }
     workgroupBarrier();
 }
+
+// One list entry as the rasterizers walk it: `mo` = mean x, mean y,
+// opacity; `conic` = a, b, c; `color` = r, g, b; `key` = its position in
+// the tile list (forward) or relative to the tile start (backward); `id` =
+// the splat (backward). `entry_none` is a no-op: opacity 0 gives α = 0.
+struct Entry {
+    mo: vec4<f32>,
+    conic: vec4<f32>,
+    color: vec4<f32>,
+    key: u32,
+    id: u32,
+}
+
+fn entry_none() -> Entry {
+    return Entry(vec4<f32>(0.0), vec4<f32>(1.0, 0.0, 1.0, 0.0), vec4<f32>(0.0), 0xffffffffu, 0u);
+}
+
+// A list walked LANES entries at a time: lane t of the subgroup fetches
+// entry m0 + t from workgroup memory and `lane_chunk` hands every lane all
+// of them (e0..e7; with LANES = 1 only e0 is used). On llvmpipe a
+// workgroup-memory read whose index it cannot prove uniform is a loop of
+// per-lane scalar loads through the stack, which dominated both
+// rasterizers when every lane read every entry; one such read per chunk
+// and constant-lane broadcasts (a register extract) cost ~LANES× less.
+// `LANES`, `lane_index` and `lane_chunk` come from the host
+// (`kernel::lane_wgsl`): 8 when every subgroup is exactly one 8-column
+// block, else 1.
+struct Chunk {
+    e0: Entry,
+    e1: Entry,
+    e2: Entry,
+    e3: Entry,
+    e4: Entry,
+    e5: Entry,
+    e6: Entry,
+    e7: Entry,
+}

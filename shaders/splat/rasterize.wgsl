@@ -8,10 +8,10 @@
 // read of a splat from workgroup memory serves PPT pixels: on CPU drivers
 // (llvmpipe) every workgroup-memory read inside a loop is a per-lane gather,
 // and those reads, not the arithmetic, dominated the 1-pixel-per-invocation
-// kernel. The sixteen pixels (a whole tile column) are named `Px` values
-// updated by an inlined function (an indexed private array would become
-// per-lane scratch memory). Each 8-column block walks only the splats that
-// can reach it (see the batch loop), which on a trained scene skips many.
+// kernel. The sixteen pixels (a whole tile column) are the named fields of
+// `Col` (an indexed private array would become per-lane scratch memory).
+// Each 8-column block walks only the splats that can reach it (see the
+// batch loop), LANES entries per step (`Chunk` in block_lists.wgsl).
 
 // Bindings and injected constants: the `kernel!` declaration in
 // crates/splat/src/gpu/rasterize.rs.
@@ -40,26 +40,76 @@ fn px_init(x: u32, y: u32) -> Px {
     return Px(f32(y) + 0.5, 1.0, vec3<f32>(0.0), 0u, x < cam.width && y < cam.height);
 }
 
-/// Composite list entry `pos` (0-based in the tile list) at one pixel;
-/// returns 1 when this pixel just finished (T would fall below T_MIN).
-fn px_step(p: ptr<function, Px>, pos: u32, mo: vec4<f32>, conic: vec3<f32>, color: vec3<f32>, px: f32) -> u32 {
-    if (!(*p).live) {
-        return 0u;
+/// Composite list entry `pos` (0-based in the tile list) at one pixel.
+fn px_step(q: Px, pos: u32, mo: vec4<f32>, conic: vec3<f32>, color: vec3<f32>, px: f32) -> Px {
+    var p = q;
+    if (!p.live) {
+        return p;
     }
-    let a = alpha_at(mo.xy, conic, mo.z, px, (*p).py);
+    let a = alpha_at(mo.xy, conic, mo.z, px, p.py);
     if (a.x < 0.0) {
-        return 0u;
+        return p;
     }
-    let tr = (*p).tr;
+    let tr = p.tr;
     let next = tr * (1.0 - a.x);
     if (next < T_MIN) {
-        (*p).live = false;
-        return 1u;
+        p.live = false;
+        return p;
     }
-    (*p).col += color * a.x * tr;
-    (*p).tr = next;
-    (*p).last = pos + 1u;
-    return 0u;
+    p.col += color * a.x * tr;
+    p.tr = next;
+    p.last = pos + 1u;
+    return p;
+}
+
+/// The sixteen pixels of one tile column, as named fields (an indexed
+/// private array would live in per-lane scratch memory on llvmpipe).
+struct Col {
+    p0: Px,
+    p1: Px,
+    p2: Px,
+    p3: Px,
+    p4: Px,
+    p5: Px,
+    p6: Px,
+    p7: Px,
+    p8: Px,
+    p9: Px,
+    p10: Px,
+    p11: Px,
+    p12: Px,
+    p13: Px,
+    p14: Px,
+    p15: Px,
+}
+
+/// Composite one list entry at the column's sixteen pixels.
+fn col_step(c: ptr<function, Col>, e: Entry, px: f32) {
+    let conic = e.conic.xyz;
+    let color = e.color.xyz;
+    (*c).p0 = px_step((*c).p0, e.key, e.mo, conic, color, px);
+    (*c).p1 = px_step((*c).p1, e.key, e.mo, conic, color, px);
+    (*c).p2 = px_step((*c).p2, e.key, e.mo, conic, color, px);
+    (*c).p3 = px_step((*c).p3, e.key, e.mo, conic, color, px);
+    (*c).p4 = px_step((*c).p4, e.key, e.mo, conic, color, px);
+    (*c).p5 = px_step((*c).p5, e.key, e.mo, conic, color, px);
+    (*c).p6 = px_step((*c).p6, e.key, e.mo, conic, color, px);
+    (*c).p7 = px_step((*c).p7, e.key, e.mo, conic, color, px);
+    (*c).p8 = px_step((*c).p8, e.key, e.mo, conic, color, px);
+    (*c).p9 = px_step((*c).p9, e.key, e.mo, conic, color, px);
+    (*c).p10 = px_step((*c).p10, e.key, e.mo, conic, color, px);
+    (*c).p11 = px_step((*c).p11, e.key, e.mo, conic, color, px);
+    (*c).p12 = px_step((*c).p12, e.key, e.mo, conic, color, px);
+    (*c).p13 = px_step((*c).p13, e.key, e.mo, conic, color, px);
+    (*c).p14 = px_step((*c).p14, e.key, e.mo, conic, color, px);
+    (*c).p15 = px_step((*c).p15, e.key, e.mo, conic, color, px);
+}
+
+fn col_live(c: Col) -> u32 {
+    return u32(c.p0.live) + u32(c.p1.live) + u32(c.p2.live) + u32(c.p3.live) + u32(c.p4.live)
+        + u32(c.p5.live) + u32(c.p6.live) + u32(c.p7.live) + u32(c.p8.live) + u32(c.p9.live)
+        + u32(c.p10.live) + u32(c.p11.live) + u32(c.p12.live) + u32(c.p13.live)
+        + u32(c.p14.live) + u32(c.p15.live);
 }
 
 fn px_write(p: Px, x: u32, y: u32) {
@@ -92,24 +142,12 @@ fn rasterize_main(@builtin(workgroup_id) wid: vec3<u32>, @builtin(local_invocati
         atomicStore(&n_done, 0u);
     }
     workgroupBarrier();
-    var p0 = px_init(x, y0);
-    var p1 = px_init(x, y0 + 1u);
-    var p2 = px_init(x, y0 + 2u);
-    var p3 = px_init(x, y0 + 3u);
-    var p4 = px_init(x, y0 + 4u);
-    var p5 = px_init(x, y0 + 5u);
-    var p6 = px_init(x, y0 + 6u);
-    var p7 = px_init(x, y0 + 7u);
-    var p8 = px_init(x, y0 + 8u);
-    var p9 = px_init(x, y0 + 9u);
-    var p10 = px_init(x, y0 + 10u);
-    var p11 = px_init(x, y0 + 11u);
-    var p12 = px_init(x, y0 + 12u);
-    var p13 = px_init(x, y0 + 13u);
-    var p14 = px_init(x, y0 + 14u);
-    var p15 = px_init(x, y0 + 15u);
-    var n_live = u32(p0.live) + u32(p1.live) + u32(p2.live) + u32(p3.live) + u32(p4.live) + u32(p5.live) + u32(p6.live) + u32(p7.live) + u32(p8.live) + u32(p9.live) + u32(p10.live) + u32(p11.live) + u32(p12.live) + u32(p13.live) + u32(p14.live) + u32(p15.live);
-    var done = n_live == 0u;
+    let lane = lane_index();
+    var col = Col(px_init(x, y0), px_init(x, y0 + 1u), px_init(x, y0 + 2u), px_init(x, y0 + 3u),
+        px_init(x, y0 + 4u), px_init(x, y0 + 5u), px_init(x, y0 + 6u), px_init(x, y0 + 7u),
+        px_init(x, y0 + 8u), px_init(x, y0 + 9u), px_init(x, y0 + 10u), px_init(x, y0 + 11u),
+        px_init(x, y0 + 12u), px_init(x, y0 + 13u), px_init(x, y0 + 14u), px_init(x, y0 + 15u));
+    var done = col_live(col) == 0u;
     if (done) {
         atomicAdd(&n_done, 1u);
     }
@@ -149,49 +187,45 @@ fn rasterize_main(@builtin(workgroup_id) wid: vec3<u32>, @builtin(local_invocati
         }
         compact_block_lists(lid, f0, f1, 2u);
         let len = s_len[my_block];
-        for (var m = 0u; m < len && !done; m++) {
-            let j = s_list[my_block * TILE_PIXELS + m];
-            let mo = s_mean_op[j];
-            let conic = s_conic[j].xyz;
-            let color = s_color[j].xyz;
-            let pos = batch - start + j;
-            var ended = px_step(&p0, pos, mo, conic, color, px);
-            ended += px_step(&p1, pos, mo, conic, color, px);
-            ended += px_step(&p2, pos, mo, conic, color, px);
-            ended += px_step(&p3, pos, mo, conic, color, px);
-            ended += px_step(&p4, pos, mo, conic, color, px);
-            ended += px_step(&p5, pos, mo, conic, color, px);
-            ended += px_step(&p6, pos, mo, conic, color, px);
-            ended += px_step(&p7, pos, mo, conic, color, px);
-            ended += px_step(&p8, pos, mo, conic, color, px);
-            ended += px_step(&p9, pos, mo, conic, color, px);
-            ended += px_step(&p10, pos, mo, conic, color, px);
-            ended += px_step(&p11, pos, mo, conic, color, px);
-            ended += px_step(&p12, pos, mo, conic, color, px);
-            ended += px_step(&p13, pos, mo, conic, color, px);
-            ended += px_step(&p14, pos, mo, conic, color, px);
-            ended += px_step(&p15, pos, mo, conic, color, px);
-            n_live -= ended;
-            if (n_live == 0u) {
+        // Subgroup-uniform trip count (the chunk broadcasts need every lane):
+        // a lane whose pixels are all done keeps fetching, its steps are no-ops.
+        for (var m0 = 0u; m0 < len && !lane_all(done); m0 += LANES) {
+            var mine = entry_none();
+            if (m0 + lane < len) {
+                let j = s_list[my_block * TILE_PIXELS + m0 + lane];
+                mine = Entry(s_mean_op[j], s_conic[j], s_color[j], batch - start + j, 0u);
+            }
+            let ch = lane_chunk(mine);
+            col_step(&col, ch.e0, px);
+            if (LANES > 1u) {
+                col_step(&col, ch.e1, px);
+                col_step(&col, ch.e2, px);
+                col_step(&col, ch.e3, px);
+                col_step(&col, ch.e4, px);
+                col_step(&col, ch.e5, px);
+                col_step(&col, ch.e6, px);
+                col_step(&col, ch.e7, px);
+            }
+            if (!done && col_live(col) == 0u) {
                 done = true;
                 atomicAdd(&n_done, 1u);
             }
         }
     }
-    px_write(p0, x, y0);
-    px_write(p1, x, y0 + 1u);
-    px_write(p2, x, y0 + 2u);
-    px_write(p3, x, y0 + 3u);
-    px_write(p4, x, y0 + 4u);
-    px_write(p5, x, y0 + 5u);
-    px_write(p6, x, y0 + 6u);
-    px_write(p7, x, y0 + 7u);
-    px_write(p8, x, y0 + 8u);
-    px_write(p9, x, y0 + 9u);
-    px_write(p10, x, y0 + 10u);
-    px_write(p11, x, y0 + 11u);
-    px_write(p12, x, y0 + 12u);
-    px_write(p13, x, y0 + 13u);
-    px_write(p14, x, y0 + 14u);
-    px_write(p15, x, y0 + 15u);
+    px_write(col.p0, x, y0);
+    px_write(col.p1, x, y0 + 1u);
+    px_write(col.p2, x, y0 + 2u);
+    px_write(col.p3, x, y0 + 3u);
+    px_write(col.p4, x, y0 + 4u);
+    px_write(col.p5, x, y0 + 5u);
+    px_write(col.p6, x, y0 + 6u);
+    px_write(col.p7, x, y0 + 7u);
+    px_write(col.p8, x, y0 + 8u);
+    px_write(col.p9, x, y0 + 9u);
+    px_write(col.p10, x, y0 + 10u);
+    px_write(col.p11, x, y0 + 11u);
+    px_write(col.p12, x, y0 + 12u);
+    px_write(col.p13, x, y0 + 13u);
+    px_write(col.p14, x, y0 + 14u);
+    px_write(col.p15, x, y0 + 15u);
 }

@@ -12,10 +12,10 @@
 // subgroup reductions and atomics were ≈ 45 % of this kernel at PPT = 8
 // (measured by dropping them); a whole column per invocation halves their
 // count per pixel (fox, 100k splats: 545 → 340–410 ms under load, same run);
-// the per-pixel state lives in sixteen named `Px` values updated by an inlined
-// function (a hand-unrolled loop: an indexed private array would become
-// per-lane scratch memory on llvmpipe);
-// with subgroups, `grad_acc` further sums over the subgroup's lanes before
+// the per-pixel state lives in the sixteen named fields of `Col` (an indexed
+// private array would become per-lane scratch memory on llvmpipe); each
+// block's list is walked LANES entries per step (`Chunk` in
+// block_lists.wgsl); with subgroups, `grad_acc` further sums over the subgroup's lanes before
 // one atomic per subgroup (see `kernel::GRAD_SUBGROUP_WGSL`).
 // Traversal starts at the largest `last_contrib` of the tile.
 
@@ -82,36 +82,104 @@ fn px_init(x: u32, y: u32) -> Px {
 
 /// Undo list entry `k_rel` (splat `mo`/`conic`/`color`) at one pixel and add
 /// its gradient contributions to `acc`.
-fn px_step(p: ptr<function, Px>, acc: ptr<function, Acc>, k_rel: u32, mo: vec4<f32>, conic: vec3<f32>,
-           color: vec3<f32>, px: f32) {
-    if (k_rel >= (*p).last) {
-        return;
+fn px_step(q: Px, acc: ptr<function, Acc>, k_rel: u32, mo: vec4<f32>, conic: vec3<f32>,
+           color: vec3<f32>, px: f32) -> Px {
+    var p = q;
+    if (k_rel >= p.last) {
+        return p;
     }
-    let a = alpha_at(mo.xy, conic, mo.z, px, (*p).py);
+    let a = alpha_at(mo.xy, conic, mo.z, px, p.py);
     if (a.x < 0.0) {
-        return;
+        return p;
     }
     let alpha = a.x;
     let g = a.y;
     let dx = a.z;
     let dy = a.w;
-    let tr = (*p).tr / (1.0 - alpha);
-    (*p).tr = tr;
-    let behind = (*p).last_alpha * (*p).last_color + (1.0 - (*p).last_alpha) * (*p).behind;
-    (*p).behind = behind;
-    (*p).last_color = color;
-    (*p).last_alpha = alpha;
-    let v_pix = (*p).v_pix;
-    let v_alpha = dot(color - behind, v_pix) * tr - (*p).t_final / (1.0 - alpha) * (*p).bg_dot;
+    let tr = p.tr / (1.0 - alpha);
+    p.tr = tr;
+    let behind = p.last_alpha * p.last_color + (1.0 - p.last_alpha) * p.behind;
+    p.behind = behind;
+    p.last_color = color;
+    p.last_alpha = alpha;
+    let v_pix = p.v_pix;
+    let v_alpha = dot(color - behind, v_pix) * tr - p.t_final / (1.0 - alpha) * p.bg_dot;
     (*acc).col += alpha * tr * v_pix;
     (*acc).touched = true;
     if (mo.z * g >= ALPHA_MAX) {
-        return;
+        return p;
     }
     (*acc).op += g * v_alpha;
     let v_power = g * (mo.z * v_alpha);
     (*acc).mean += v_power * vec2<f32>(-(conic.x * dx + conic.y * dy), -(conic.z * dy + conic.y * dx));
     (*acc).conic += v_power * vec3<f32>(-0.5 * dx * dx, -dx * dy, -0.5 * dy * dy);
+    return p;
+}
+
+/// The sixteen pixels of one tile column, as named fields (an indexed
+/// private array would live in per-lane scratch memory on llvmpipe).
+struct Col {
+    p0: Px,
+    p1: Px,
+    p2: Px,
+    p3: Px,
+    p4: Px,
+    p5: Px,
+    p6: Px,
+    p7: Px,
+    p8: Px,
+    p9: Px,
+    p10: Px,
+    p11: Px,
+    p12: Px,
+    p13: Px,
+    p14: Px,
+    p15: Px,
+}
+
+/// Undo one list entry at the column's sixteen pixels, then add the
+/// column's (and, with subgroups, the subgroup's) gradient sums to the
+/// splat's. Call from subgroup-uniform control flow.
+fn col_step(c: ptr<function, Col>, e: Entry, px: f32, my_max: u32, leader: bool) {
+    var acc: Acc;
+    acc.mean = vec2<f32>(0.0);
+    acc.conic = vec3<f32>(0.0);
+    acc.op = 0.0;
+    acc.col = vec3<f32>(0.0);
+    acc.touched = false;
+    let k_rel = e.key;
+    if (k_rel < my_max) {
+        let conic = e.conic.xyz;
+        let color = e.color.xyz;
+        (*c).p0 = px_step((*c).p0, &acc, k_rel, e.mo, conic, color, px);
+        (*c).p1 = px_step((*c).p1, &acc, k_rel, e.mo, conic, color, px);
+        (*c).p2 = px_step((*c).p2, &acc, k_rel, e.mo, conic, color, px);
+        (*c).p3 = px_step((*c).p3, &acc, k_rel, e.mo, conic, color, px);
+        (*c).p4 = px_step((*c).p4, &acc, k_rel, e.mo, conic, color, px);
+        (*c).p5 = px_step((*c).p5, &acc, k_rel, e.mo, conic, color, px);
+        (*c).p6 = px_step((*c).p6, &acc, k_rel, e.mo, conic, color, px);
+        (*c).p7 = px_step((*c).p7, &acc, k_rel, e.mo, conic, color, px);
+        (*c).p8 = px_step((*c).p8, &acc, k_rel, e.mo, conic, color, px);
+        (*c).p9 = px_step((*c).p9, &acc, k_rel, e.mo, conic, color, px);
+        (*c).p10 = px_step((*c).p10, &acc, k_rel, e.mo, conic, color, px);
+        (*c).p11 = px_step((*c).p11, &acc, k_rel, e.mo, conic, color, px);
+        (*c).p12 = px_step((*c).p12, &acc, k_rel, e.mo, conic, color, px);
+        (*c).p13 = px_step((*c).p13, &acc, k_rel, e.mo, conic, color, px);
+        (*c).p14 = px_step((*c).p14, &acc, k_rel, e.mo, conic, color, px);
+        (*c).p15 = px_step((*c).p15, &acc, k_rel, e.mo, conic, color, px);
+    }
+    if (grad_any(acc.touched)) {
+        let base = 12u * e.id;
+        grad_acc(base + 0u, acc.mean.x, leader);
+        grad_acc(base + 1u, acc.mean.y, leader);
+        grad_acc(base + 4u, acc.conic.x, leader);
+        grad_acc(base + 5u, acc.conic.y, leader);
+        grad_acc(base + 6u, acc.conic.z, leader);
+        grad_acc(base + 7u, acc.op, leader);
+        grad_acc(base + 8u, acc.col.x, leader);
+        grad_acc(base + 9u, acc.col.y, leader);
+        grad_acc(base + 10u, acc.col.z, leader);
+    }
 }
 
 @compute @workgroup_size(THREADS, 1)
@@ -123,38 +191,15 @@ fn rasterize_backward_main(@builtin(workgroup_id) wid: vec3<u32>, @builtin(local
     let px = f32(x) + 0.5;
     let start = ranges[2u * tile];
     let end = max(ranges[2u * tile + 1u], start);
-    var p0 = px_init(x, y0);
-    var p1 = px_init(x, y0 + 1u);
-    var p2 = px_init(x, y0 + 2u);
-    var p3 = px_init(x, y0 + 3u);
-    var p4 = px_init(x, y0 + 4u);
-    var p5 = px_init(x, y0 + 5u);
-    var p6 = px_init(x, y0 + 6u);
-    var p7 = px_init(x, y0 + 7u);
-    var p8 = px_init(x, y0 + 8u);
-    var p9 = px_init(x, y0 + 9u);
-    var p10 = px_init(x, y0 + 10u);
-    var p11 = px_init(x, y0 + 11u);
-    var p12 = px_init(x, y0 + 12u);
-    var p13 = px_init(x, y0 + 13u);
-    var p14 = px_init(x, y0 + 14u);
-    var p15 = px_init(x, y0 + 15u);
-    var my_max = p0.last;
-    my_max = max(my_max, p1.last);
-    my_max = max(my_max, p2.last);
-    my_max = max(my_max, p3.last);
-    my_max = max(my_max, p4.last);
-    my_max = max(my_max, p5.last);
-    my_max = max(my_max, p6.last);
-    my_max = max(my_max, p7.last);
-    my_max = max(my_max, p8.last);
-    my_max = max(my_max, p9.last);
-    my_max = max(my_max, p10.last);
-    my_max = max(my_max, p11.last);
-    my_max = max(my_max, p12.last);
-    my_max = max(my_max, p13.last);
-    my_max = max(my_max, p14.last);
-    my_max = max(my_max, p15.last);
+    let lane = lane_index();
+    var col = Col(px_init(x, y0), px_init(x, y0 + 1u), px_init(x, y0 + 2u), px_init(x, y0 + 3u),
+        px_init(x, y0 + 4u), px_init(x, y0 + 5u), px_init(x, y0 + 6u), px_init(x, y0 + 7u),
+        px_init(x, y0 + 8u), px_init(x, y0 + 9u), px_init(x, y0 + 10u), px_init(x, y0 + 11u),
+        px_init(x, y0 + 12u), px_init(x, y0 + 13u), px_init(x, y0 + 14u), px_init(x, y0 + 15u));
+    let my_max = max(max(max(max(col.p0.last, col.p1.last), max(col.p2.last, col.p3.last)),
+        max(max(col.p4.last, col.p5.last), max(col.p6.last, col.p7.last))),
+        max(max(max(col.p8.last, col.p9.last), max(col.p10.last, col.p11.last)),
+        max(max(col.p12.last, col.p13.last), max(col.p14.last, col.p15.last))));
     let my_list = lid3.x / LIST_COLS;
     if (lid == 0u) {
         atomicStore(&wg_max_last, 0u);
@@ -221,50 +266,27 @@ fn rasterize_backward_main(@builtin(workgroup_id) wid: vec3<u32>, @builtin(local
         }
         compact_block_lists(lid, f0, f1, LISTS);
         // The trip count is uniform over a block's invocations, so the loop
-        // stays subgroup-uniform for `grad_acc` (entries at or past a
-        // pixel's `last` are skipped in `px_step`).
+        // stays subgroup-uniform for `lane_chunk` and `grad_acc` (entries at
+        // or past a pixel's `last` are skipped in `px_step`).
         let len = s_len[my_list];
-        for (var m = 0u; m < len; m++) {
-            let j = s_list[my_list * TILE_PIXELS + m];
-            let k_rel = batch_hi - 1u - j - start; // position in the tile list
-            let mo = s_mean_op[j];
-            let conic = s_conic[j].xyz;
-            let color = s_color[j].xyz;
-            var acc: Acc;
-            acc.mean = vec2<f32>(0.0);
-            acc.conic = vec3<f32>(0.0);
-            acc.op = 0.0;
-            acc.col = vec3<f32>(0.0);
-            acc.touched = false;
-            if (k_rel < my_max) {
-                px_step(&p0, &acc, k_rel, mo, conic, color, px);
-                px_step(&p1, &acc, k_rel, mo, conic, color, px);
-                px_step(&p2, &acc, k_rel, mo, conic, color, px);
-                px_step(&p3, &acc, k_rel, mo, conic, color, px);
-                px_step(&p4, &acc, k_rel, mo, conic, color, px);
-                px_step(&p5, &acc, k_rel, mo, conic, color, px);
-                px_step(&p6, &acc, k_rel, mo, conic, color, px);
-                px_step(&p7, &acc, k_rel, mo, conic, color, px);
-                px_step(&p8, &acc, k_rel, mo, conic, color, px);
-                px_step(&p9, &acc, k_rel, mo, conic, color, px);
-                px_step(&p10, &acc, k_rel, mo, conic, color, px);
-                px_step(&p11, &acc, k_rel, mo, conic, color, px);
-                px_step(&p12, &acc, k_rel, mo, conic, color, px);
-                px_step(&p13, &acc, k_rel, mo, conic, color, px);
-                px_step(&p14, &acc, k_rel, mo, conic, color, px);
-                px_step(&p15, &acc, k_rel, mo, conic, color, px);
+        for (var m0 = 0u; m0 < len; m0 += LANES) {
+            var mine = entry_none();
+            if (m0 + lane < len) {
+                let j = s_list[my_list * TILE_PIXELS + m0 + lane];
+                // Position in the tile list.
+                let k_rel = batch_hi - 1u - j - start;
+                mine = Entry(s_mean_op[j], s_conic[j], s_color[j], k_rel, s_id[j]);
             }
-            if (grad_any(acc.touched)) {
-                let base = 12u * s_id[j];
-                grad_acc(base + 0u, acc.mean.x, leader);
-                grad_acc(base + 1u, acc.mean.y, leader);
-                grad_acc(base + 4u, acc.conic.x, leader);
-                grad_acc(base + 5u, acc.conic.y, leader);
-                grad_acc(base + 6u, acc.conic.z, leader);
-                grad_acc(base + 7u, acc.op, leader);
-                grad_acc(base + 8u, acc.col.x, leader);
-                grad_acc(base + 9u, acc.col.y, leader);
-                grad_acc(base + 10u, acc.col.z, leader);
+            let ch = lane_chunk(mine);
+            col_step(&col, ch.e0, px, my_max, leader);
+            if (LANES > 1u) {
+                col_step(&col, ch.e1, px, my_max, leader);
+                col_step(&col, ch.e2, px, my_max, leader);
+                col_step(&col, ch.e3, px, my_max, leader);
+                col_step(&col, ch.e4, px, my_max, leader);
+                col_step(&col, ch.e5, px, my_max, leader);
+                col_step(&col, ch.e6, px, my_max, leader);
+                col_step(&col, ch.e7, px, my_max, leader);
             }
         }
         batch_hi = batch_lo;

@@ -47,6 +47,10 @@ pub struct GpuContext {
     /// (so no subgroup spans two blocks and `grad_acc` stays
     /// subgroup-uniform), else 16 (one block per tile).
     pub list_cols: u32,
+    /// Entries the rasterizers fetch per list step, one per subgroup lane
+    /// (`kernel::lane_wgsl`): 8 when subgroups are on, every subgroup has
+    /// exactly 8 lanes and `list_cols` is 8 (llvmpipe with AVX2), else 1.
+    pub lanes: u32,
     /// Device limits in force.
     pub limits: wgpu::Limits,
 }
@@ -59,6 +63,8 @@ impl std::fmt::Debug for GpuContext {
             .field("float_atomics", &self.float_atomics)
             .field("subgroups", &self.subgroups)
             .field("timestamps", &self.timestamps)
+            .field("list_cols", &self.list_cols)
+            .field("lanes", &self.lanes)
             .finish()
     }
 }
@@ -121,11 +127,21 @@ impl GpuContext {
         } else {
             16
         };
+        let lanes = if subgroups
+            && list_cols == 8
+            && adapter_info.subgroup_min_size == 8
+            && adapter_info.subgroup_max_size == 8
+        {
+            8
+        } else {
+            1
+        };
         Ok(GpuContext {
             device,
             queue,
             adapter_info,
             list_cols,
+            lanes,
             float_atomics,
             subgroups,
             timestamps,

@@ -243,17 +243,58 @@ fn grad_acc(i: u32, v: f32, leader: bool) { grad_add(i, v); }\n";
 /// The full WGSL module text for a kernel, atomics variant and subgroup
 /// variant (`subgroups` only matters for kernels with gradient atomics).
 pub fn shader_source(decl: &KernelDecl, float_atomics: bool, subgroups: bool) -> String {
-    shader_source_cols(decl, float_atomics, subgroups, 8)
+    shader_source_cols(decl, float_atomics, subgroups, 8, 1)
+}
+
+/// Whether a kernel walks per-block splat lists (`block_lists.wgsl`), so
+/// it takes the [`lane_wgsl`] helpers.
+pub fn uses_block_lists(decl: &KernelDecl) -> bool {
+    decl.source.contains("struct Chunk")
+}
+
+/// `LANES`, `lane_index`, `lane_all` and `lane_chunk` for the rasterizers'
+/// list walk (see `block_lists.wgsl`): with `lanes` = 8 (every subgroup is
+/// exactly 8 invocations, one column block) lane t fetches entry m0 + t and
+/// `subgroupBroadcast` hands it to the others; with 1 each invocation
+/// fetches every entry itself.
+pub fn lane_wgsl(lanes: u32) -> String {
+    if lanes == 1 {
+        return "const LANES: u32 = 1u;\n\
+fn lane_index() -> u32 { return 0u; }\n\
+fn lane_all(b: bool) -> bool { return b; }\n\
+fn lane_chunk(e: Entry) -> Chunk { return Chunk(e, e, e, e, e, e, e, e); }\n"
+            .into();
+    }
+    let mut s = format!(
+        "const LANES: u32 = {lanes}u;\n\
+fn lane_index() -> u32 {{ return subgroupExclusiveAdd(1u); }}\n\
+fn lane_all(b: bool) -> bool {{ return subgroupAll(b); }}\n"
+    );
+    for t in 0..lanes {
+        s.push_str(&format!(
+            "fn lane_entry{t}(e: Entry) -> Entry {{ return Entry(subgroupBroadcast(e.mo, {t}u), \
+subgroupBroadcast(e.conic, {t}u), subgroupBroadcast(e.color, {t}u), \
+subgroupBroadcast(e.key, {t}u), subgroupBroadcast(e.id, {t}u)); }}\n"
+        ));
+    }
+    let args: Vec<String> = (0..lanes).map(|t| format!("lane_entry{t}(e)")).collect();
+    s.push_str(&format!(
+        "fn lane_chunk(e: Entry) -> Chunk {{ return Chunk({}); }}\n",
+        args.join(", ")
+    ));
+    s
 }
 
 /// [`shader_source`] with the column-block width `list_cols` (8 or 16) of
 /// `rasterize_backward`'s per-block splat lists (see
-/// [`GpuContext::list_cols`]).
+/// [`GpuContext::list_cols`]) and the rasterizers' list-walk width `lanes`
+/// (1 or 8, [`GpuContext::lanes`]).
 pub fn shader_source_cols(
     decl: &KernelDecl,
     float_atomics: bool,
     subgroups: bool,
     list_cols: u32,
+    lanes: u32,
 ) -> String {
     let mut s = String::with_capacity(COMMON_WGSL.len() + decl.source.len() + 512);
     let subgroups = subgroups && decl.uses_grad_atomics;
@@ -261,6 +302,9 @@ pub fn shader_source_cols(
     s.push('\n');
     if decl.uses_grad_atomics {
         s.push_str(&format!("const LIST_COLS: u32 = {list_cols}u;\n"));
+    }
+    if uses_block_lists(decl) {
+        s.push_str(&lane_wgsl(lanes));
     }
     if decl.uses_grad_atomics {
         s.push_str(if float_atomics {
@@ -349,8 +393,14 @@ impl Kernel {
             .create_shader_module(wgpu::ShaderModuleDescriptor {
                 label: Some(decl.name),
                 source: wgpu::ShaderSource::Wgsl(
-                    shader_source_cols(decl, ctx.float_atomics, ctx.subgroups, ctx.list_cols)
-                        .into(),
+                    shader_source_cols(
+                        decl,
+                        ctx.float_atomics,
+                        ctx.subgroups,
+                        ctx.list_cols,
+                        ctx.lanes,
+                    )
+                    .into(),
                 ),
             });
         let pipelines = decl

@@ -1,7 +1,8 @@
 //! GPU forward (projection, binning, rasterization) against the CPU reference.
 
-use super::ctx;
 use super::scenes::{camera, random_splats};
+use super::{ctx, ctx_cas};
+use crate::gpu::GpuContext;
 use crate::gpu::forward::{ForwardKernels, forward, upload_splats};
 use crate::reference;
 use crate::types::RenderOptions;
@@ -20,6 +21,20 @@ pub fn max_abs_diff(name: &str, a: &[f32], b: &[f32]) -> f32 {
 #[test]
 fn forward_matches_reference_on_random_scenes() {
     let Some(c) = ctx() else { return };
+    run(c);
+}
+
+/// The same on the no-subgroup context, whose rasterizer walks its lists
+/// one entry per invocation (`lanes` = 1, the path of adapters without
+/// 8-lane subgroups).
+#[test]
+fn forward_matches_reference_one_lane() {
+    let Some(c) = ctx_cas() else { return };
+    assert_eq!(c.lanes, 1);
+    run(c);
+}
+
+fn run(c: &GpuContext) {
     let k = ForwardKernels::new(c);
     let cases = [
         (64u32, 48u32, 300usize, 0u32, false, [0.0f32, 0.0, 0.0]),

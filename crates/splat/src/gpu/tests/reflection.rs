@@ -145,7 +145,24 @@ fn wide_subgroup_list_variant_validates() {
         .filter(|d| d.uses_grad_atomics)
     {
         for float_atomics in [true, false] {
-            let src = crate::gpu::kernel::shader_source_cols(decl, float_atomics, true, 16);
+            let src = crate::gpu::kernel::shader_source_cols(decl, float_atomics, true, 16, 1);
+            parse_and_validate(decl.name, &src);
+        }
+    }
+}
+
+/// The rasterizers' 8-lane list walk (`kernel::lane_wgsl`, subgroup
+/// broadcasts) validates in every atomics variant.
+#[test]
+fn lane_chunk_variant_validates() {
+    let decls: Vec<_> = crate::gpu::ALL_KERNELS
+        .iter()
+        .filter(|d| crate::gpu::kernel::uses_block_lists(d))
+        .collect();
+    assert_eq!(decls.len(), 2, "rasterize and rasterize_backward");
+    for decl in decls {
+        for float_atomics in [true, false] {
+            let src = crate::gpu::kernel::shader_source_cols(decl, float_atomics, true, 8, 8);
             parse_and_validate(decl.name, &src);
         }
     }
