@@ -1046,6 +1046,8 @@ fn refine_grid(
             rgb: &pr.grid_rgb,
             fwd: &pr.fwd,
             valid_f: &pr.valid_f,
+            bwd: &pr.bwd,
+            valid_b: &pr.valid_b,
             u_factor: o.labels.u_factor,
             l_factor: o.labels.l_factor,
         };
