@@ -134,6 +134,11 @@ pub struct ObjectOptions {
     /// `passes × K` frames from where the object was found).
     #[cfg_attr(feature = "cli", arg(skip))]
     pub propagation_passes: usize,
+    /// Weight of the static votes: the frames reached that call the pixel
+    /// static vote the same way, `− static_weight · clamp(votes − 1, 0,
+    /// 1)` (default 1; 0 = only moving is carried).
+    #[cfg_attr(feature = "cli", arg(skip))]
+    pub propagation_static_weight: f32,
 }
 
 impl Default for ObjectOptions {
@@ -156,6 +161,7 @@ impl Default for ObjectOptions {
             propagation_weight: 2.0,
             propagation_decay: 0.8,
             propagation_passes: 2,
+            propagation_static_weight: 1.0,
         }
     }
 }
@@ -174,6 +180,7 @@ impl ObjectOptions {
             self.superpixel_gain,
             self.superpixel_k,
             self.propagation_weight,
+            self.propagation_static_weight,
         ]
         .iter()
         .all(|w| w.is_finite() && *w >= 0.0);
@@ -463,7 +470,7 @@ pub fn propagation_prior(masks: &[Vec<bool>], e: &Evidence, o: &ObjectOptions) -
         .map(|t| {
             (0..np)
                 .map(|i| {
-                    let mut votes = 0f32;
+                    let (mut votes, mut against) = (0f32, 0f32);
                     for forward in [true, false] {
                         let (mut x, mut y) = ((i % w) as f32, (i / w) as f32);
                         let mut j = i;
@@ -493,11 +500,14 @@ pub fn propagation_prior(masks: &[Vec<bool>], e: &Evidence, o: &ObjectOptions) -
                             j = next;
                             if masks[to][j] {
                                 votes += weight;
+                            } else {
+                                against += weight;
                             }
                             weight *= o.propagation_decay;
                         }
                     }
                     (votes - 1.0).clamp(0.0, 1.0)
+                        - o.propagation_static_weight * (against - 1.0).clamp(0.0, 1.0)
                 })
                 .collect()
         })
@@ -790,8 +800,6 @@ mod tests {
     /// x0(t)` forward (and its negative backward); background that the
     /// square covers or uncovers fails the cycle check.
     struct Video {
-        w: usize,
-        h: usize,
         probs: Vec<Plane>,
         s: Vec<Vec<f32>>,
         textured: Vec<Vec<bool>>,
@@ -824,11 +832,11 @@ mod tests {
             let pair = |t: usize, from: usize, d: f32| {
                 let mut f = Flow::zeros(w, h);
                 let mut valid = vec![true; w * h];
-                for i in 0..w * h {
+                for (i, ok) in valid.iter_mut().enumerate() {
                     if sq(from, i) {
                         f.u.data[i] = d;
                     } else if sq(t, i) || sq(t + 1, i) {
-                        valid[i] = false;
+                        *ok = false;
                     }
                 }
                 (f, valid)
@@ -840,8 +848,6 @@ mod tests {
                 .map(|t| pair(t, t + 1, x0[t] as f32 - x0[t + 1] as f32))
                 .unzip();
             Video {
-                w,
-                h,
                 probs: vec![Plane::filled(w, h, 0.1); n],
                 s: vec![vec![0.01; w * h]; n],
                 textured: vec![vec![true; w * h]; n],
@@ -877,8 +883,8 @@ mod tests {
     /// The object stands still in frames 0–2 (the MLP calls it static and
     /// its residual is just above L's threshold) and moves 2 px per frame
     /// in frames 3–9 (U). The cut alone finds it in frames 3–9 only; with
-    /// mask propagation the votes of the later frames carry it back to
-    /// frames 0–2, with no background.
+    /// mask propagation of the moving votes the later frames carry it back
+    /// to frames 0–2, with no background.
     #[test]
     fn propagation_finds_an_object_in_the_frames_where_it_stands_still() {
         let (w, h, n) = (48, 30, 10);
@@ -918,6 +924,7 @@ mod tests {
         }
         let on = ObjectOptions {
             propagation_frames: 4,
+            propagation_static_weight: 0.0,
             ..off
         };
         let m = graph_cut(&e, &on);
@@ -968,23 +975,36 @@ mod tests {
             }
         }
         let e = vid.evidence();
-        let o = ObjectOptions {
-            propagation_frames: 4,
-            ..Default::default()
-        };
-        let m = graph_cut(&e, &o);
-        let count = |t: usize| (0..w * h).filter(|&i| m[t][i] && patch(i)).count();
-        assert_eq!(count(5), 64);
-        for t in (0..n).filter(|t| *t != 5) {
-            assert_eq!(count(t), 0, "frame {t}");
-            assert!((0..w * h).filter(|&i| m[t][i]).count() == 100, "frame {t}");
-        }
-        let prior = propagation_prior(&m, &e, &o);
-        for t in (0..n).filter(|t| *t != 5) {
-            assert!(
-                (0..w * h).all(|i| !patch(i) || prior[t][i] == 0.0),
-                "frame {t}"
+        for static_weight in [0.0, 1.0] {
+            let o = ObjectOptions {
+                propagation_frames: 4,
+                propagation_static_weight: static_weight,
+                ..Default::default()
+            };
+            let m = graph_cut(&e, &o);
+            let count = |t: usize| (0..w * h).filter(|&i| m[t][i] && patch(i)).count();
+            if static_weight == 0.0 {
+                assert_eq!(count(5), 64);
+            }
+            for t in (0..n).filter(|t| *t != 5) {
+                assert_eq!(count(t), 0, "frame {t}");
+                assert!((0..w * h).filter(|&i| m[t][i]).count() == 100, "frame {t}");
+            }
+            let first = graph_cut(
+                &e,
+                &ObjectOptions {
+                    propagation_frames: 0,
+                    ..o.clone()
+                },
             );
+            assert_eq!((0..w * h).filter(|&i| first[5][i] && patch(i)).count(), 64);
+            let prior = propagation_prior(&first, &e, &o);
+            for t in (0..n).filter(|t| *t != 5) {
+                assert!(
+                    (0..w * h).all(|i| !patch(i) || prior[t][i] <= 0.0),
+                    "frame {t}"
+                );
+            }
         }
     }
 
