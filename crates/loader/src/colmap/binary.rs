@@ -3,7 +3,7 @@
 //! Counts are checked against the bytes left before allocating, so a corrupt
 //! count fails cleanly instead of exhausting memory.
 
-use super::{ColmapImage, ColmapModel, Point2D, Point3D, Records, read_model_files};
+use super::{ColmapImage, ColmapModel, Point2D, Point3D, Record, Records, read_model_files};
 use crate::camera::{Camera, CameraModel, Pose};
 use crate::error::{LoaderError, Result};
 use crate::io::{read_bytes, write_atomic};
@@ -118,31 +118,28 @@ impl<'a> Cursor<'a> {
     }
 }
 
-/// Read a binary record file of `what`s: a u64 count (`count`, checked
-/// against the bytes left at `min_record` bytes a record), then that many
-/// records, each read by `record` as (id, value) and kept in file order;
-/// nothing may follow.
-fn read_records<K: Ord + Copy + std::fmt::Display, V>(
+/// Read a binary record file: a u64 count (`count`, checked against the
+/// bytes left at `min_record` bytes a record), then that many records, each
+/// read by `record` and kept in file order; nothing may follow.
+fn read_records<K: Ord + Copy + std::fmt::Display, V: Record<Id = K>>(
     path: &Path,
-    what: &str,
     count: &str,
     min_record: usize,
-    mut record: impl FnMut(&mut Cursor) -> Result<(K, V)>,
+    mut record: impl FnMut(&mut Cursor) -> Result<V>,
 ) -> Result<Records<K, V>> {
     let buf = read_bytes(path)?;
     let mut c = Cursor::new(&buf, path);
     let n = c.count(count, min_record)?;
     let mut records = Records::with_capacity(n);
     for _ in 0..n {
-        let (id, v) = record(&mut c)?;
-        records.insert(path, None, what, id, v)?;
+        records.insert(path, None, record(&mut c)?)?;
     }
     c.finish()?;
     Ok(records)
 }
 
 fn read_cameras(path: &Path) -> Result<Records<u32, Camera>> {
-    read_records(path, "camera", "number of cameras", 24, |c| {
+    read_records(path, "number of cameras", 24, |c| {
         let id = c.u32("camera id")?;
         let model_id = c.i32("camera model id")?;
         let model = CameraModel::from_id(model_id).ok_or_else(|| {
@@ -156,21 +153,18 @@ fn read_cameras(path: &Path) -> Result<Records<u32, Camera>> {
         let params = (0..model.num_params())
             .map(|_| c.f64("camera params"))
             .collect::<Result<Vec<f64>>>()?;
-        Ok((
+        Ok(Camera {
             id,
-            Camera {
-                id,
-                model,
-                width,
-                height,
-                params,
-            },
-        ))
+            model,
+            width,
+            height,
+            params,
+        })
     })
 }
 
 fn read_images(path: &Path) -> Result<Records<u32, ColmapImage>> {
-    read_records(path, "image", "number of images", 4 + 56 + 4 + 1 + 8, |c| {
+    read_records(path, "number of images", 4 + 56 + 4 + 1 + 8, |c| {
         let id = c.u32("image id")?;
         let qvec = c.f64s::<4>("image qvec")?;
         let tvec = c.f64s::<3>("image tvec")?;
@@ -187,50 +181,38 @@ fn read_images(path: &Path) -> Result<Records<u32, ColmapImage>> {
             });
         }
         let pose = Pose { qvec, tvec };
-        Ok((
+        Ok(ColmapImage {
             id,
-            ColmapImage {
-                id,
-                pose,
-                camera_id,
-                name,
-                points2d,
-            },
-        ))
+            pose,
+            camera_id,
+            name,
+            points2d,
+        })
     })
 }
 
 fn read_points(path: &Path) -> Result<Records<u64, Point3D>> {
-    read_records(
-        path,
-        "point3D",
-        "number of points3D",
-        8 + 24 + 3 + 8 + 8,
-        |c| {
-            let id = c.u64("point3D id")?;
-            let xyz = c.f64s::<3>("point3D xyz")?;
-            let rgb = [
-                c.u8("point3D rgb")?,
-                c.u8("point3D rgb")?,
-                c.u8("point3D rgb")?,
-            ];
-            let error = c.f64("point3D error")?;
-            let nt = c.count("track length", 8)?;
-            let track = (0..nt)
-                .map(|_| Ok((c.u32("track image id")?, c.u32("track point2D idx")?)))
-                .collect::<Result<Vec<(u32, u32)>>>()?;
-            Ok((
-                id,
-                Point3D {
-                    id,
-                    xyz,
-                    rgb,
-                    error,
-                    track,
-                },
-            ))
-        },
-    )
+    read_records(path, "number of points3D", 8 + 24 + 3 + 8 + 8, |c| {
+        let id = c.u64("point3D id")?;
+        let xyz = c.f64s::<3>("point3D xyz")?;
+        let rgb = [
+            c.u8("point3D rgb")?,
+            c.u8("point3D rgb")?,
+            c.u8("point3D rgb")?,
+        ];
+        let error = c.f64("point3D error")?;
+        let nt = c.count("track length", 8)?;
+        let track = (0..nt)
+            .map(|_| Ok((c.u32("track image id")?, c.u32("track point2D idx")?)))
+            .collect::<Result<Vec<(u32, u32)>>>()?;
+        Ok(Point3D {
+            id,
+            xyz,
+            rgb,
+            error,
+            track,
+        })
+    })
 }
 
 /// Read `cameras.bin`, `images.bin` and `points3D.bin` from `dir`.

@@ -276,7 +276,39 @@ pub(crate) struct Records<K, V> {
     pub order: Vec<K>,
 }
 
-impl<K: Ord + Copy + std::fmt::Display, V> Records<K, V> {
+/// A model record that carries its own id.
+pub(crate) trait Record {
+    type Id: Ord + Copy + std::fmt::Display;
+    /// What it is in error messages ("camera", "image", "point3D").
+    const KIND: &'static str;
+    fn id(&self) -> Self::Id;
+}
+
+impl Record for Camera {
+    type Id = u32;
+    const KIND: &'static str = "camera";
+    fn id(&self) -> u32 {
+        self.id
+    }
+}
+
+impl Record for ColmapImage {
+    type Id = u32;
+    const KIND: &'static str = "image";
+    fn id(&self) -> u32 {
+        self.id
+    }
+}
+
+impl Record for Point3D {
+    type Id = u64;
+    const KIND: &'static str = "point3D";
+    fn id(&self) -> u64 {
+        self.id
+    }
+}
+
+impl<K: Ord + Copy + std::fmt::Display, V: Record<Id = K>> Records<K, V> {
     pub fn with_capacity(n: usize) -> Self {
         Records {
             map: BTreeMap::new(),
@@ -284,21 +316,14 @@ impl<K: Ord + Copy + std::fmt::Display, V> Records<K, V> {
         }
     }
 
-    /// Add record `id` (a `what`: "camera", "image", "point3D") read from
-    /// `path`, at text line `line` when there is one.
-    pub fn insert(
-        &mut self,
-        path: &Path,
-        line: Option<usize>,
-        what: &str,
-        id: K,
-        v: V,
-    ) -> Result<()> {
+    /// Add a record read from `path`, at text line `line` when there is one.
+    pub fn insert(&mut self, path: &Path, line: Option<usize>, v: V) -> Result<()> {
+        let id = v.id();
         if self.map.insert(id, v).is_some() {
             let at = line.map_or(String::new(), |ln| format!("line {ln}: "));
             return Err(LoaderError::format(
                 path,
-                format!("{at}duplicate {what} id {id}"),
+                format!("{at}duplicate {} id {id}", V::KIND),
             ));
         }
         self.order.push(id);

@@ -2,7 +2,7 @@
 //! as written by COLMAP's `Reconstruction::Write*Text`. Floats are written in
 //! Rust's shortest round-trip form, so text → model → text is lossless.
 
-use super::{ColmapImage, ColmapModel, Point2D, Point3D, Records, read_model_files};
+use super::{ColmapImage, ColmapModel, Point2D, Point3D, Record, Records, read_model_files};
 use crate::camera::{Camera, CameraModel, Pose};
 use crate::error::{LoaderError, Result};
 use crate::io::{read_string, write_atomic};
@@ -24,25 +24,23 @@ fn is_data(line: &str) -> bool {
     !t.is_empty() && !t.starts_with('#')
 }
 
-/// Read a text record file with one `what` per data line (comments and
+/// Read a text record file with one record per data line (comments and
 /// blank lines skipped): `record` parses a line's tokens, given its
-/// 1-based number, into (id, value); records keep file order.
-fn read_line_records<K: Ord + Copy + std::fmt::Display, V>(
+/// 1-based number; records keep file order.
+fn read_line_records<K: Ord + Copy + std::fmt::Display, V: Record<Id = K>>(
     path: &Path,
-    what: &str,
-    mut record: impl FnMut(usize, std::str::SplitWhitespace) -> Result<(K, V)>,
+    mut record: impl FnMut(usize, std::str::SplitWhitespace) -> Result<V>,
 ) -> Result<Records<K, V>> {
     let text = read_string(path)?;
     let mut records = Records::with_capacity(0);
     for (i, line) in text.lines().enumerate().filter(|(_, l)| is_data(l)) {
-        let (id, v) = record(i + 1, line.split_whitespace())?;
-        records.insert(path, Some(i + 1), what, id, v)?;
+        records.insert(path, Some(i + 1), record(i + 1, line.split_whitespace())?)?;
     }
     Ok(records)
 }
 
 fn read_cameras(path: &Path) -> Result<Records<u32, Camera>> {
-    read_line_records(path, "camera", |ln, mut it| {
+    read_line_records(path, |ln, mut it| {
         let id: u32 = parse(path, ln, "camera id", it.next())?;
         let name = it.next().unwrap_or("");
         let model = CameraModel::from_name(name)
@@ -66,16 +64,13 @@ fn read_cameras(path: &Path) -> Result<Records<u32, Camera>> {
                 ),
             ));
         }
-        Ok((
+        Ok(Camera {
             id,
-            Camera {
-                id,
-                model,
-                width,
-                height,
-                params,
-            },
-        ))
+            model,
+            width,
+            height,
+            params,
+        })
     })
 }
 
@@ -136,13 +131,13 @@ fn read_images(path: &Path) -> Result<Records<u32, ColmapImage>> {
             name,
             points2d,
         };
-        records.insert(path, Some(ln), "image", id, image)?;
+        records.insert(path, Some(ln), image)?;
     }
     Ok(records)
 }
 
 fn read_points(path: &Path) -> Result<Records<u64, Point3D>> {
-    read_line_records(path, "point3D", |ln, mut it| {
+    read_line_records(path, |ln, mut it| {
         let id: u64 = parse(path, ln, "point3D id", it.next())?;
         let mut xyz = [0.0; 3];
         for x in &mut xyz {
@@ -169,16 +164,13 @@ fn read_points(path: &Path) -> Result<Records<u64, Point3D>> {
                 ))
             })
             .collect::<Result<Vec<(u32, u32)>>>()?;
-        Ok((
+        Ok(Point3D {
             id,
-            Point3D {
-                id,
-                xyz,
-                rgb,
-                error,
-                track,
-            },
-        ))
+            xyz,
+            rgb,
+            error,
+            track,
+        })
     })
 }
 
