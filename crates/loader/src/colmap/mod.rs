@@ -485,6 +485,44 @@ mod tests {
         assert!(e.contains("points3D.bin") && e.contains("not found"), "{e}");
     }
 
+    /// A record whose id repeats an earlier one is refused, naming the
+    /// file, the kind of record and (in text) the line, in both formats.
+    #[test]
+    fn repeated_record_ids_are_refused() {
+        let dir = tempfile::tempdir().unwrap();
+        let m = testutil::sample_model();
+        let txt = dir.path().join("txt");
+        write_model_text(&m, &txt).unwrap();
+        let cams = std::fs::read_to_string(txt.join("cameras.txt")).unwrap();
+        let first = cams.lines().find(|l| !l.starts_with('#')).unwrap();
+        std::fs::write(txt.join("cameras.txt"), format!("{cams}{first}\n")).unwrap();
+        let e = read_model(&txt).unwrap_err().to_string();
+        let line = cams.lines().count() + 1;
+        assert!(
+            e.contains("cameras.txt") && e.contains(&format!("line {line}: duplicate camera id 1")),
+            "{e}"
+        );
+        // Binary: points3D.bin with its first point written twice.
+        let bin = dir.path().join("bin");
+        write_model_binary(&m, &bin).unwrap();
+        let mut one = m.clone();
+        let first_id = *one.points3d.keys().next().unwrap();
+        one.points3d.retain(|id, _| *id == first_id);
+        one.file_order = Default::default();
+        let mut record = Vec::new();
+        binary::encode_points(&one, &mut record);
+        let mut bytes = std::fs::read(bin.join("points3D.bin")).unwrap();
+        let n = u64::from_le_bytes(bytes[..8].try_into().unwrap()) + 1;
+        bytes[..8].copy_from_slice(&n.to_le_bytes());
+        bytes.extend_from_slice(&record[8..]);
+        std::fs::write(bin.join("points3D.bin"), &bytes).unwrap();
+        let e = read_model(&bin).unwrap_err().to_string();
+        assert!(
+            e.contains("points3D.bin") && e.contains(&format!("duplicate point3D id {first_id}")),
+            "{e}"
+        );
+    }
+
     /// Every unusable record is refused at read time, naming the file and
     /// the record (the trainer would otherwise train on garbage).
     #[test]
