@@ -1,5 +1,6 @@
-// block_lists.wgsl — per-column-block splat lists, shared by rasterize.wgsl
-// and rasterize_backward.wgsl (prepended to each by its host module).
+// block_lists.wgsl — per-column-block splat lists and the tile column's
+// pixels `Col`, shared by rasterize.wgsl and rasterize_backward.wgsl
+// (prepended to each by its host module).
 // Each invocation has flagged, in `f0` / `f1` (bit q = its slot
 // 16·lid + q), the splats of the current batch that can touch column block
 // 0 / 1; `compact_block_lists` turns the flags into ordered lists
@@ -77,4 +78,35 @@ struct Chunk {
     e5: Entry,
     e6: Entry,
     e7: Entry,
+}
+
+// The sixteen pixels of one tile column as named fields (an indexed private
+// array would live in per-lane scratch memory on llvmpipe). `Px` and
+// `px_init` are each rasterizer's own pixel state (WGSL resolves
+// module-scope names in any order).
+struct Col {
+    p0: Px,
+    p1: Px,
+    p2: Px,
+    p3: Px,
+    p4: Px,
+    p5: Px,
+    p6: Px,
+    p7: Px,
+    p8: Px,
+    p9: Px,
+    p10: Px,
+    p11: Px,
+    p12: Px,
+    p13: Px,
+    p14: Px,
+    p15: Px,
+}
+
+// Column x's pixels from row y0, each in its initial state.
+fn col_init(x: u32, y0: u32) -> Col {
+    return Col(px_init(x, y0), px_init(x, y0 + 1u), px_init(x, y0 + 2u), px_init(x, y0 + 3u),
+        px_init(x, y0 + 4u), px_init(x, y0 + 5u), px_init(x, y0 + 6u), px_init(x, y0 + 7u),
+        px_init(x, y0 + 8u), px_init(x, y0 + 9u), px_init(x, y0 + 10u), px_init(x, y0 + 11u),
+        px_init(x, y0 + 12u), px_init(x, y0 + 13u), px_init(x, y0 + 14u), px_init(x, y0 + 15u));
 }

@@ -62,27 +62,6 @@ fn px_step(q: Px, pos: u32, mo: vec4<f32>, conic: vec3<f32>, color: vec3<f32>, p
     return p;
 }
 
-/// The sixteen pixels of one tile column, as named fields (an indexed
-/// private array would live in per-lane scratch memory on llvmpipe).
-struct Col {
-    p0: Px,
-    p1: Px,
-    p2: Px,
-    p3: Px,
-    p4: Px,
-    p5: Px,
-    p6: Px,
-    p7: Px,
-    p8: Px,
-    p9: Px,
-    p10: Px,
-    p11: Px,
-    p12: Px,
-    p13: Px,
-    p14: Px,
-    p15: Px,
-}
-
 /// Composite one list entry at the column's sixteen pixels.
 fn col_step(c: ptr<function, Col>, e: Entry, px: f32) {
     let conic = e.conic.xyz;
@@ -143,10 +122,7 @@ fn rasterize_main(@builtin(workgroup_id) wid: vec3<u32>, @builtin(local_invocati
     }
     workgroupBarrier();
     let lane = lane_index();
-    var col = Col(px_init(x, y0), px_init(x, y0 + 1u), px_init(x, y0 + 2u), px_init(x, y0 + 3u),
-        px_init(x, y0 + 4u), px_init(x, y0 + 5u), px_init(x, y0 + 6u), px_init(x, y0 + 7u),
-        px_init(x, y0 + 8u), px_init(x, y0 + 9u), px_init(x, y0 + 10u), px_init(x, y0 + 11u),
-        px_init(x, y0 + 12u), px_init(x, y0 + 13u), px_init(x, y0 + 14u), px_init(x, y0 + 15u));
+    var col = col_init(x, y0);
     var done = col_live(col) == 0u;
     if (done) {
         atomicAdd(&n_done, 1u);

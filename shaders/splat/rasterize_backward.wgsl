@@ -116,27 +116,6 @@ fn px_step(q: Px, acc: ptr<function, Acc>, k_rel: u32, mo: vec4<f32>, conic: vec
     return p;
 }
 
-/// The sixteen pixels of one tile column, as named fields (an indexed
-/// private array would live in per-lane scratch memory on llvmpipe).
-struct Col {
-    p0: Px,
-    p1: Px,
-    p2: Px,
-    p3: Px,
-    p4: Px,
-    p5: Px,
-    p6: Px,
-    p7: Px,
-    p8: Px,
-    p9: Px,
-    p10: Px,
-    p11: Px,
-    p12: Px,
-    p13: Px,
-    p14: Px,
-    p15: Px,
-}
-
 /// Undo one list entry at the column's sixteen pixels, then add the
 /// column's (and, with subgroups, the subgroup's) gradient sums to the
 /// splat's. Call from subgroup-uniform control flow.
@@ -192,10 +171,7 @@ fn rasterize_backward_main(@builtin(workgroup_id) wid: vec3<u32>, @builtin(local
     let start = ranges[2u * tile];
     let end = max(ranges[2u * tile + 1u], start);
     let lane = lane_index();
-    var col = Col(px_init(x, y0), px_init(x, y0 + 1u), px_init(x, y0 + 2u), px_init(x, y0 + 3u),
-        px_init(x, y0 + 4u), px_init(x, y0 + 5u), px_init(x, y0 + 6u), px_init(x, y0 + 7u),
-        px_init(x, y0 + 8u), px_init(x, y0 + 9u), px_init(x, y0 + 10u), px_init(x, y0 + 11u),
-        px_init(x, y0 + 12u), px_init(x, y0 + 13u), px_init(x, y0 + 14u), px_init(x, y0 + 15u));
+    var col = col_init(x, y0);
     let my_max = max(max(max(max(col.p0.last, col.p1.last), max(col.p2.last, col.p3.last)),
         max(max(col.p4.last, col.p5.last), max(col.p6.last, col.p7.last))),
         max(max(max(col.p8.last, col.p9.last), max(col.p10.last, col.p11.last)),
