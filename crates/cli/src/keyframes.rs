@@ -290,7 +290,6 @@ pub fn link_keyframes(scene: &Path, kept: &[String], out: &Path) -> Result<()> {
 
 #[cfg(test)]
 mod tests {
-    #![allow(clippy::unwrap_used, clippy::expect_used)]
     use super::*;
 
     /// A textured frame shifted right by `dx` pixels.

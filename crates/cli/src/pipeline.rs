@@ -300,7 +300,6 @@ pub fn decide(
 
 #[cfg(test)]
 mod tests {
-    #![allow(clippy::unwrap_used, clippy::expect_used)]
     use super::*;
     use crate::test_mtime::set_mtime;
     use serde_json::json;

@@ -578,7 +578,6 @@ pub fn probe_cpu_factor() -> anyhow::Result<f64> {
 
 #[cfg(test)]
 mod tests {
-    #![allow(clippy::unwrap_used, clippy::expect_used)]
     use super::*;
 
     fn video() -> Input {

@@ -254,7 +254,6 @@ figure img{{max-width:320px;display:block}}figcaption{{font-size:12px}}.row{{dis
 
 #[cfg(test)]
 mod tests {
-    #![allow(clippy::unwrap_used, clippy::expect_used)]
     use super::*;
 
     #[test]

@@ -1,7 +1,6 @@
 //! Tests for `composite.rs` on small backgrounds and DAVIS folders written
 //! to temp dirs: pasted pixels exactly where the mask says, the rest
 //! untouched, split / transforms / gt_motion consistent, bad input named.
-#![allow(clippy::unwrap_used, clippy::expect_used)]
 
 use super::*;
 use crate::transforms::{IntrinsicFields, Transforms, TransformsFrame};

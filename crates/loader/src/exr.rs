@@ -246,7 +246,6 @@ fn store<'a, T>(
 
 #[cfg(test)]
 mod tests {
-    #![allow(clippy::unwrap_used, clippy::expect_used)]
     use super::*;
 
     /// `read_exr`'s error for `bytes` written as `name`; it names the file.

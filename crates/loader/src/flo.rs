@@ -136,7 +136,6 @@ pub fn write_flo(path: impl AsRef<Path>, flow: &FlowField) -> Result<()> {
 
 #[cfg(test)]
 mod tests {
-    #![allow(clippy::unwrap_used, clippy::expect_used)]
     use super::*;
 
     #[test]

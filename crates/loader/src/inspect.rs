@@ -219,7 +219,6 @@ pub fn inspect(path: impl AsRef<Path>) -> Result<InspectReport> {
 
 #[cfg(test)]
 mod tests {
-    #![allow(clippy::unwrap_used, clippy::expect_used)]
     use super::*;
     use crate::camera::{CameraModel, Pose};
     use crate::colmap::{ColmapImage, Point3D, write_model_text};

@@ -279,7 +279,6 @@ pub fn write_png_rgb32f(path: impl AsRef<Path>, img: &Rgb32FImage) -> Result<()>
 
 #[cfg(test)]
 mod tests {
-    #![allow(clippy::unwrap_used, clippy::expect_used)]
     use super::*;
 
     #[test]

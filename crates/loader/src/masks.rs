@@ -125,7 +125,6 @@ pub fn write_keep_masks_from_moving(
 
 #[cfg(test)]
 mod tests {
-    #![allow(clippy::unwrap_used, clippy::expect_used)]
     use super::*;
 
     #[test]

@@ -1,5 +1,4 @@
 //! Tests for `scene.rs` on small scene folders written to temp dirs.
-#![allow(clippy::unwrap_used, clippy::expect_used)]
 
 use super::*;
 use crate::camera::CameraModel;

@@ -184,7 +184,6 @@ impl Split {
 
 #[cfg(test)]
 mod tests {
-    #![allow(clippy::unwrap_used, clippy::expect_used)]
     use super::*;
 
     fn names() -> Vec<String> {

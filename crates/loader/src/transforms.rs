@@ -663,7 +663,6 @@ fn camera_from_fields(
 
 #[cfg(test)]
 mod tests {
-    #![allow(clippy::unwrap_used, clippy::expect_used)]
     use super::*;
 
     fn touch_png(p: &Path, w: u32, h: u32) {

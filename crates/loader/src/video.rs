@@ -157,7 +157,6 @@ pub fn ffmpeg_available() -> bool {
 
 #[cfg(test)]
 mod tests {
-    #![allow(clippy::unwrap_used, clippy::expect_used)]
     use super::*;
 
     /// Skip only when ffmpeg is absent and `CI` is unset; under CI it must exist.

@@ -44,7 +44,6 @@ pub fn masks_from_gt_motion(images: &Path, gt_motion: &Path, out: &Path) -> Resu
 
 #[cfg(test)]
 mod tests {
-    #![allow(clippy::unwrap_used, clippy::expect_used)]
     use super::*;
 
     #[test]

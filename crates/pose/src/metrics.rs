@@ -426,7 +426,6 @@ pub fn evaluate(
 
 #[cfg(test)]
 mod tests {
-    #![allow(clippy::unwrap_used, clippy::expect_used)]
     use super::*;
     use nalgebra::{Rotation3, Unit};
 

@@ -108,7 +108,6 @@ pub fn read_pair_stats(db: &Path) -> Result<PairStats> {
 }
 
 #[cfg(test)]
-#[allow(clippy::unwrap_used)]
 mod tests {
     use super::*;
 

@@ -192,7 +192,6 @@ pub fn require_success(step: &str, outcome: &StepOutcome) -> Result<()> {
 
 #[cfg(test)]
 mod tests {
-    #![allow(clippy::unwrap_used, clippy::expect_used)]
     use super::*;
 
     #[test]

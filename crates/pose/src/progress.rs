@@ -112,7 +112,6 @@ pub fn parse_line(line: &str) -> Option<Count> {
 
 #[cfg(test)]
 mod tests {
-    #![allow(clippy::unwrap_used, clippy::expect_used)]
     use super::*;
 
     /// Lines captured from COLMAP 3.8 runs on the small built-in scene.

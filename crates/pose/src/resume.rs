@@ -139,7 +139,6 @@ pub fn decide(
 
 #[cfg(test)]
 mod tests {
-    #![allow(clippy::unwrap_used, clippy::expect_used)]
     use super::*;
 
     fn key(images: &[(&str, u64)]) -> FeatureKey {

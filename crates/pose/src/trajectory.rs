@@ -104,7 +104,6 @@ pub fn load_trajectory(path: &Path) -> Result<(Vec<NamedPose>, TrajectorySource)
 
 #[cfg(test)]
 mod tests {
-    #![allow(clippy::unwrap_used, clippy::expect_used)]
     use super::*;
     use loader::colmap::{ColmapImage, ColmapModel, write_model_binary};
     use loader::transforms::c2w_opengl_from_pose;

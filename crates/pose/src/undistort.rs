@@ -190,7 +190,6 @@ pub fn install_undistorted(
 
 #[cfg(test)]
 mod tests {
-    #![allow(clippy::unwrap_used, clippy::expect_used)]
     use super::*;
 
     fn cam(model: CameraModel, params: Vec<f64>) -> Camera {

@@ -90,7 +90,6 @@ impl<T: Args> Args for Flags<T> {
 
 #[cfg(test)]
 mod tests {
-    #![allow(clippy::unwrap_used, clippy::expect_used)]
     use super::*;
     use crate::RomoOptions;
     use crate::objects::ObjectMethod;

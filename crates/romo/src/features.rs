@@ -170,7 +170,6 @@ pub fn standardise(maps: &mut [FeatureMap]) {
 
 #[cfg(test)]
 mod tests {
-    #![allow(clippy::unwrap_used, clippy::expect_used)]
     use super::*;
 
     #[test]

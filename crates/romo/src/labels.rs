@@ -720,7 +720,6 @@ pub fn propagate_u(
 
 #[cfg(test)]
 mod tests {
-    #![allow(clippy::unwrap_used, clippy::expect_used)]
     use super::*;
     use crate::plane::Plane;
 

@@ -385,7 +385,6 @@ impl Solver {
 
 #[cfg(test)]
 mod tests {
-    #![allow(clippy::unwrap_used)]
     use super::*;
     use rand::{Rng, SeedableRng};
 

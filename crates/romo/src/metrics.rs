@@ -276,7 +276,6 @@ pub fn evaluate_masks_excluding(
 
 #[cfg(test)]
 mod tests {
-    #![allow(clippy::unwrap_used, clippy::expect_used)]
     use super::*;
     use image::GrayImage;
 

@@ -1,6 +1,6 @@
 //! Tests of the MLP: Geman–McClure and full-loss gradients against central
 //! finite differences, and training on separable toy problems.
-#![allow(clippy::unwrap_used, clippy::expect_used, clippy::needless_range_loop)]
+#![allow(clippy::needless_range_loop)]
 
 use super::*;
 

@@ -623,7 +623,6 @@ fn solve(e: &Evidence, o: &ObjectOptions, a: &[Vec<f32>]) -> Vec<Vec<bool>> {
 
 #[cfg(test)]
 mod tests {
-    #![allow(clippy::unwrap_used)]
     use super::*;
 
     fn flat_rgb(w: usize, h: usize, f: impl Fn(usize, usize) -> f32 + Sync) -> Rgb {

@@ -1198,7 +1198,6 @@ fn report_frames(
 
 #[cfg(test)]
 mod tests {
-    #![allow(clippy::unwrap_used, clippy::expect_used)]
     use super::*;
 
     /// A partial `flow` object changes only the fields it names: the rest

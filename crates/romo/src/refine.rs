@@ -359,7 +359,6 @@ pub fn to_keep_mask(prob: &Plane, threshold: f32) -> image::GrayImage {
 
 #[cfg(test)]
 mod tests {
-    #![allow(clippy::unwrap_used, clippy::expect_used)]
     use super::*;
 
     #[test]

@@ -238,7 +238,6 @@ pub fn complete(prob: &mut [f32], labels: &[u32], threshold: f32, fixed: Option<
 
 #[cfg(test)]
 mod tests {
-    #![allow(clippy::unwrap_used, clippy::expect_used)]
     use super::*;
 
     /// Background flow: a smooth depth ramp (1.0–2.0 px); a 12×10 object

@@ -236,7 +236,6 @@ pub fn read_checkpoint(path: impl AsRef<Path>) -> Result<Checkpoint> {
 
 #[cfg(test)]
 mod tests {
-    #![allow(clippy::unwrap_used, clippy::expect_used)]
     use super::*;
 
     fn sample(deg: u32) -> Splats {

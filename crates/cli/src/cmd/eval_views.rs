@@ -382,7 +382,6 @@ pub fn run(args: &Args, ctx: &Ctx) -> anyhow::Result<serde_json::Value> {
 
 #[cfg(test)]
 mod tests {
-    #![allow(clippy::unwrap_used, clippy::expect_used)]
     use super::*;
     use splat::train::eval::ViewScore;
     use splat::types::RenderCamera;

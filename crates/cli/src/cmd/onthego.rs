@@ -391,7 +391,6 @@ fn train_variant(args: &Args, v: &Variant, net: Option<&mut Lpips>, ctx: &Ctx) -
 
 #[cfg(test)]
 mod tests {
-    #![allow(clippy::unwrap_used, clippy::expect_used)]
     use super::*;
 
     #[test]

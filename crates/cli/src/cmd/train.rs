@@ -584,7 +584,6 @@ fn score_held_out(
 
 #[cfg(test)]
 mod tests {
-    #![allow(clippy::unwrap_used, clippy::expect_used)]
     use super::*;
     use clap::Parser;
 

@@ -292,7 +292,6 @@ pub fn write_model_text(model: &ColmapModel, dir: impl AsRef<Path>) -> Result<()
 
 #[cfg(test)]
 mod tests {
-    #![allow(clippy::unwrap_used, clippy::expect_used)]
     use super::super::testutil::sample_model;
     use super::*;
 

@@ -1,5 +1,4 @@
 //! Tests for the splat PLY reader/writer.
-#![allow(clippy::unwrap_used, clippy::expect_used)]
 
 use super::*;
 

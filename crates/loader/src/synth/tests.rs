@@ -1,6 +1,5 @@
 //! Tests of the synthetic scenes: renderer known answers, determinism,
 //! ground-truth consistency (masks, points), and the shipped specs.
-#![allow(clippy::unwrap_used, clippy::expect_used)]
 
 use super::raster::{self, NONE, Tri, Vertex, View};
 use super::texture::{Pattern, Style, Texture};

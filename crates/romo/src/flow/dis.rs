@@ -500,7 +500,6 @@ multiversion! {
 
 #[cfg(test)]
 mod tests {
-    #![allow(clippy::unwrap_used, clippy::expect_used)]
     use super::*;
     use crate::flow::epe;
 

@@ -150,7 +150,6 @@ multiversion! {
 
 #[cfg(test)]
 mod tests {
-    #![allow(clippy::unwrap_used, clippy::expect_used)]
     use super::*;
 
     fn ramp(w: usize, h: usize) -> Plane {

@@ -157,7 +157,6 @@ multiversion! {
 
 #[cfg(test)]
 mod tests {
-    #![allow(clippy::unwrap_used, clippy::expect_used)]
     use super::*;
     use crate::flow::variational::{NS, Packing, VariationalOptions};
 

@@ -520,7 +520,6 @@ pub fn refine(im: &Images, flow: &mut Flow, o: &VariationalOptions) {
 
 #[cfg(test)]
 mod tests {
-    #![allow(clippy::unwrap_used, clippy::expect_used)]
     use super::*;
 
     /// Pack a full-resolution array into colour `c` (one field per row).

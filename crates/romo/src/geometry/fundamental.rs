@@ -172,7 +172,6 @@ pub fn seven_point(a: &[Pt], b: &[Pt]) -> Vec<Matrix3<f64>> {
 
 #[cfg(test)]
 mod tests {
-    #![allow(clippy::unwrap_used, clippy::expect_used)]
     use super::*;
 
     #[test]

@@ -62,7 +62,6 @@ pub fn transfer_sq(h: &Matrix3<f64>, a: Pt, b: Pt) -> f64 {
 
 #[cfg(test)]
 mod tests {
-    #![allow(clippy::unwrap_used, clippy::expect_used)]
     use super::*;
 
     #[test]

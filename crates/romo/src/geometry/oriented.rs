@@ -172,7 +172,6 @@ impl Default for VoteOptions {
 
 #[cfg(test)]
 mod tests {
-    #![allow(clippy::unwrap_used, clippy::expect_used)]
     use super::*;
 
     /// F = K⁻ᵀ [t]ₓ R K⁻¹ for x₂ = R x₁ + t.

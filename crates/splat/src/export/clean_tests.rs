@@ -1,4 +1,4 @@
-#![allow(clippy::unwrap_used, clippy::expect_used, clippy::needless_range_loop)]
+#![allow(clippy::needless_range_loop)]
 use super::*;
 use crate::types::sh_coeffs;
 use rand::{Rng, SeedableRng};

@@ -391,7 +391,7 @@ pub fn read_spz(path: &Path, convert_axes: bool) -> Result<(SpzHeader, Splats)> 
 
 #[cfg(test)]
 mod tests {
-    #![allow(clippy::unwrap_used, clippy::expect_used, clippy::needless_range_loop)]
+    #![allow(clippy::needless_range_loop)]
     use super::*;
     use crate::export::test_data::random_splats;
 

@@ -1,4 +1,4 @@
-#![allow(clippy::unwrap_used, clippy::expect_used, clippy::needless_range_loop)]
+#![allow(clippy::needless_range_loop)]
 //! Writes one sample of every format through [`export`] and reads each back.
 //! With `ROMOSPLAT_EXPORT_SAMPLES=DIR` the samples go to DIR (for
 //! `scripts/check_exports.sh`, which feeds them to external tools);

@@ -121,7 +121,6 @@ pub fn read_splat(path: &Path) -> Result<Splats> {
 
 #[cfg(test)]
 mod tests {
-    #![allow(clippy::unwrap_used, clippy::expect_used)]
     use super::*;
 
     #[test]

@@ -174,7 +174,6 @@ impl McmcKernels {
 
 #[cfg(test)]
 mod tests {
-    #![allow(clippy::unwrap_used, clippy::expect_used)]
     use super::*;
     use crate::backend::TrainBackend;
     use crate::gpu::forward::upload_splats;

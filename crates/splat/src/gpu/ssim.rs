@@ -159,7 +159,6 @@ impl Ssim {
 
 #[cfg(test)]
 mod tests {
-    #![allow(clippy::unwrap_used, clippy::expect_used)]
     use super::*;
     use crate::gpu::loss::{Loss, LossArgs, LossUniforms, blocks};
 

@@ -102,7 +102,6 @@ pub fn add_regularization_grads(s: &Splats, g: &mut SplatGrads, reg: &Regulariza
 
 #[cfg(test)]
 mod tests {
-    #![allow(clippy::unwrap_used, clippy::expect_used)]
     use super::*;
 
     #[test]

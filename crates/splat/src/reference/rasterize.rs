@@ -263,7 +263,6 @@ pub fn rasterize(
 
 #[cfg(test)]
 mod tests {
-    #![allow(clippy::unwrap_used)]
     use super::*;
     use rand::{Rng, SeedableRng};
 

@@ -1,6 +1,5 @@
 //! Known answers for INRIA adaptive density control: what is cloned, split,
 //! pruned and reset, with which parameters and Adam moments, and the cap.
-#![allow(clippy::unwrap_used, clippy::expect_used)]
 
 use super::*;
 use crate::strategy::opacities;

@@ -1,6 +1,5 @@
 //! Known answers for the relocation formula and properties of relocation,
 //! growth and the refinement schedule.
-#![allow(clippy::unwrap_used, clippy::expect_used)]
 
 use super::*;
 use crate::types::{AdamState, DensifyStats};

@@ -168,7 +168,6 @@ pub(crate) fn test_image(w: usize, h: usize, phase: f64, noise: f64) -> Vec<f32>
 
 #[cfg(test)]
 mod tests {
-    #![allow(clippy::unwrap_used, clippy::expect_used)]
     use super::*;
 
     fn img(w: usize, h: usize, phase: f64) -> Vec<f32> {

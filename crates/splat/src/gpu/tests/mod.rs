@@ -1,6 +1,5 @@
 //! GPU tests. They skip (with a message) only when no adapter exists and the
 //! `CI` environment variable is unset; under CI a missing adapter fails.
-#![allow(clippy::unwrap_used, clippy::expect_used)]
 
 mod backward;
 mod binning;
