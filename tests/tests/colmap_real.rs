@@ -223,6 +223,8 @@ fn unmasked_run_registers_every_frame_and_sees_the_pedestrians() {
 
 fn assert_models_close(a: &ColmapModel, b: &ColmapModel, rel: f64) {
     let close = |x: f64, y: f64| (x - y).abs() <= rel * x.abs().max(y.abs()).max(1.0);
+    let all_close =
+        |a: &[f64], b: &[f64]| a.len() == b.len() && a.iter().zip(b).all(|(x, y)| close(*x, *y));
     assert_eq!(a.cameras.len(), b.cameras.len());
     for (id, ca) in &a.cameras {
         let cb = &b.cameras[id];
@@ -230,37 +232,25 @@ fn assert_models_close(a: &ColmapModel, b: &ColmapModel, rel: f64) {
             (ca.model, ca.width, ca.height),
             (cb.model, cb.width, cb.height)
         );
-        assert!(ca.params.iter().zip(&cb.params).all(|(x, y)| close(*x, *y)));
+        assert!(all_close(&ca.params, &cb.params));
     }
     assert_eq!(a.images.len(), b.images.len());
     for (id, ia) in &a.images {
         let ib = &b.images[id];
         assert_eq!((&ia.name, ia.camera_id), (&ib.name, ib.camera_id));
-        assert!(
-            ia.pose
-                .qvec
-                .iter()
-                .zip(&ib.pose.qvec)
-                .all(|(x, y)| close(*x, *y))
-        );
-        assert!(
-            ia.pose
-                .tvec
-                .iter()
-                .zip(&ib.pose.tvec)
-                .all(|(x, y)| close(*x, *y))
-        );
+        assert!(all_close(&ia.pose.qvec, &ib.pose.qvec));
+        assert!(all_close(&ia.pose.tvec, &ib.pose.tvec));
         assert_eq!(ia.points2d.len(), ib.points2d.len());
         for (pa, pb) in ia.points2d.iter().zip(&ib.points2d) {
             assert_eq!(pa.point3d_id, pb.point3d_id);
-            assert!(close(pa.xy[0], pb.xy[0]) && close(pa.xy[1], pb.xy[1]));
+            assert!(all_close(&pa.xy, &pb.xy));
         }
     }
     assert_eq!(a.points3d.len(), b.points3d.len());
     for (id, pa) in &a.points3d {
         let pb = &b.points3d[id];
         assert_eq!((pa.rgb, &pa.track), (pb.rgb, &pb.track));
-        assert!(pa.xyz.iter().zip(&pb.xyz).all(|(x, y)| close(*x, *y)));
+        assert!(all_close(&pa.xyz, &pb.xyz));
         assert!(close(pa.error, pb.error));
     }
 }

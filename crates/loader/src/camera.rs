@@ -129,29 +129,52 @@ pub struct Camera {
 }
 
 impl Camera {
+    /// A camera whose `params` has the model's count (see
+    /// [`CameraModel::num_params`]); the error says the count otherwise.
+    pub fn new(
+        id: u32,
+        model: CameraModel,
+        width: u64,
+        height: u64,
+        params: Vec<f64>,
+    ) -> std::result::Result<Self, String> {
+        if params.len() != model.num_params() {
+            return Err(format!(
+                "model {} needs {} params, found {}",
+                model.name(),
+                model.num_params(),
+                params.len()
+            ));
+        }
+        Ok(Camera {
+            id,
+            model,
+            width,
+            height,
+            params,
+        })
+    }
+
+    /// Index of fy in `params`: 0 when the model has one focal length (fx = fy),
+    /// else 1. The principal point follows it, then the distortion.
+    fn fy_index(&self) -> usize {
+        usize::from(!self.model.single_focal())
+    }
+
     /// Focal lengths (fx, fy) in pixels.
     pub fn focal(&self) -> (f64, f64) {
-        let p = &self.params;
-        if self.model.single_focal() {
-            (p[0], p[0])
-        } else {
-            (p[0], p[1])
-        }
+        (self.params[0], self.params[self.fy_index()])
     }
 
     /// Principal point (cx, cy) in pixels.
     pub fn principal_point(&self) -> (f64, f64) {
-        let p = &self.params;
-        if self.model.single_focal() {
-            (p[1], p[2])
-        } else {
-            (p[2], p[3])
-        }
+        let c = self.fy_index() + 1;
+        (self.params[c], self.params[c + 1])
     }
 
     /// Distortion parameters (everything after focal and principal point).
     pub fn distortion(&self) -> &[f64] {
-        let n = if self.model.single_focal() { 3 } else { 4 };
+        let n = self.fy_index() + 3;
         &self.params[n.min(self.params.len())..]
     }
 

@@ -57,28 +57,37 @@ fn sample(i: isize, n: usize, border: Border) -> Option<usize> {
     }
 }
 
-/// Separable Gaussian filter of a single-channel `w×h` image.
+/// Separable Gaussian filter of a single-channel `w×h` image: a pass along
+/// the rows, then one along the columns.
 pub fn gaussian_filter(img: &[f64], w: usize, h: usize, k: &[f64], border: Border) -> Vec<f64> {
+    let rows = filter_pass(img, w, h, k, border, Axis::X);
+    filter_pass(&rows, w, h, k, border, Axis::Y)
+}
+
+/// The image axis a 1D filter pass runs along.
+#[derive(Clone, Copy, PartialEq)]
+enum Axis {
+    X,
+    Y,
+}
+
+/// One 1D pass of the kernel `k` (centred) over a `w×h` image along `axis`.
+fn filter_pass(img: &[f64], w: usize, h: usize, k: &[f64], border: Border, axis: Axis) -> Vec<f64> {
     let r = (k.len() / 2) as isize;
-    let mut tmp = vec![0.0; w * h];
-    tmp.par_chunks_mut(w).enumerate().for_each(|(y, row)| {
-        for (x, out) in row.iter_mut().enumerate() {
-            let mut acc = 0.0;
-            for (t, &kv) in k.iter().enumerate() {
-                if let Some(xx) = sample(x as isize + t as isize - r, w, border) {
-                    acc += kv * img[y * w + xx];
-                }
-            }
-            *out = acc;
-        }
-    });
+    let n = if axis == Axis::X { w } else { h };
     let mut out = vec![0.0; w * h];
     out.par_chunks_mut(w).enumerate().for_each(|(y, row)| {
         for (x, o) in row.iter_mut().enumerate() {
+            let i = if axis == Axis::X { x } else { y };
             let mut acc = 0.0;
             for (t, &kv) in k.iter().enumerate() {
-                if let Some(yy) = sample(y as isize + t as isize - r, h, border) {
-                    acc += kv * tmp[yy * w + x];
+                if let Some(j) = sample(i as isize + t as isize - r, n, border) {
+                    acc += kv
+                        * img[if axis == Axis::X {
+                            y * w + j
+                        } else {
+                            j * w + x
+                        }];
                 }
             }
             *o = acc;

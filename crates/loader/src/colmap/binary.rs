@@ -153,13 +153,8 @@ fn read_cameras(path: &Path) -> Result<Records<u32, Camera>> {
         let params = (0..model.num_params())
             .map(|_| c.f64("camera params"))
             .collect::<Result<Vec<f64>>>()?;
-        Ok(Camera {
-            id,
-            model,
-            width,
-            height,
-            params,
-        })
+        Camera::new(id, model, width, height, params)
+            .map_err(|e| LoaderError::format(path, format!("camera {id}: {e}")))
     })
 }
 

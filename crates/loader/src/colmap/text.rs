@@ -53,24 +53,8 @@ fn read_cameras(path: &Path) -> Result<Records<u32, Camera>> {
         let params = it
             .map(|t| parse::<f64>(path, ln, "camera param", Some(t)))
             .collect::<Result<Vec<f64>>>()?;
-        if params.len() != model.num_params() {
-            return Err(LoaderError::format(
-                path,
-                format!(
-                    "line {ln}: model {} needs {} params, found {}",
-                    model.name(),
-                    model.num_params(),
-                    params.len()
-                ),
-            ));
-        }
-        Ok(Camera {
-            id,
-            model,
-            width,
-            height,
-            params,
-        })
+        Camera::new(id, model, width, height, params)
+            .map_err(|e| LoaderError::format(path, format!("line {ln}: {e}")))
     })
 }
 
@@ -202,11 +186,7 @@ fn images_text(m: &ColmapModel) -> String {
         .values()
         .map(|i| i.points2d.iter().filter(|p| p.point3d_id.is_some()).count())
         .sum();
-    let mean = if m.images.is_empty() {
-        0.0
-    } else {
-        nobs as f64 / m.images.len() as f64
-    };
+    let mean = mean_per(nobs, m.images.len());
     let _ = writeln!(
         s,
         "# Number of images: {}, mean observations per image: {mean}",
@@ -234,16 +214,17 @@ fn images_text(m: &ColmapModel) -> String {
     s
 }
 
+/// `total / n` for the header comments, 0 when there is nothing (as COLMAP).
+fn mean_per(total: usize, n: usize) -> f64 {
+    if n == 0 { 0.0 } else { total as f64 / n as f64 }
+}
+
 fn points_text(m: &ColmapModel) -> String {
     let mut s = String::new();
     s.push_str("# 3D point list with one line of data per point:\n");
     s.push_str("#   POINT3D_ID, X, Y, Z, R, G, B, ERROR, TRACK[] as (IMAGE_ID, POINT2D_IDX)\n");
     let tl: usize = m.points3d.values().map(|p| p.track.len()).sum();
-    let mean = if m.points3d.is_empty() {
-        0.0
-    } else {
-        tl as f64 / m.points3d.len() as f64
-    };
+    let mean = mean_per(tl, m.points3d.len());
     let _ = writeln!(
         s,
         "# Number of points: {}, mean track length: {mean}",
