@@ -47,15 +47,29 @@ fn l1_grad(@builtin(workgroup_id) wid: vec3<u32>, @builtin(num_workgroups) nwg: 
     s_l1[lid] = l1;
     s_se[lid] = se;
     workgroupBarrier();
-    for (var off = 128u; off > 0u; off = off / 2u) {
-        if (lid < off) {
-            s_l1[lid] += s_l1[lid + off];
-            s_se[lid] += s_se[lid + off];
+    // Two-level sum: WORKGROUP_SIZE / 8 invocations add 8 values each, then
+    // one adds those. Loops rather than `if`s: llvmpipe runs a masked `if` body in every
+    // subgroup, but skips a loop no lane of the subgroup enters; a halving
+    // tree cost 8 barriers and 8 full passes (about a third of this kernel).
+    for (var i = lid; i < WORKGROUP_SIZE / 8u; i += WORKGROUP_SIZE) {
+        var a = 0.0;
+        var b = 0.0;
+        for (var j = 0u; j < 8u; j++) {
+            a += s_l1[8u * i + j];
+            b += s_se[8u * i + j];
         }
-        workgroupBarrier();
+        s_l1[8u * i] = a;
+        s_se[8u * i] = b;
     }
-    if (lid == 0u) {
-        partials[2u * block] = s_l1[0];
-        partials[2u * block + 1u] = s_se[0];
+    workgroupBarrier();
+    for (var i = lid; i < 1u; i += WORKGROUP_SIZE) {
+        var a = 0.0;
+        var b = 0.0;
+        for (var j = 0u; j < WORKGROUP_SIZE / 8u; j++) {
+            a += s_l1[8u * j];
+            b += s_se[8u * j];
+        }
+        partials[2u * block] = a;
+        partials[2u * block + 1u] = b;
     }
 }

@@ -44,7 +44,8 @@ struct Px {
     // List entries up to the last contributor (0 outside the image).
     last: u32,
     v_pix: vec3<f32>,
-    bg_dot: f32,
+    // T_final · (background · dL/dpixel).
+    t_bg: f32,
     tr: f32,
     behind: vec3<f32>,
     last_alpha: f32,
@@ -72,7 +73,7 @@ fn px_init(x: u32, y: u32) -> Px {
         p.last = last_contrib[pix];
         p.v_pix = vec3<f32>(v_image[3u * pix], v_image[3u * pix + 1u], v_image[3u * pix + 2u]);
     }
-    p.bg_dot = dot(cam.background.xyz, p.v_pix);
+    p.t_bg = p.t_final * dot(cam.background.xyz, p.v_pix);
     p.tr = p.t_final;
     p.behind = vec3<f32>(0.0);
     p.last_alpha = 0.0;
@@ -96,14 +97,15 @@ fn px_step(q: Px, acc: ptr<function, Acc>, k_rel: u32, mo: vec4<f32>, conic: vec
     let g = a.y;
     let dx = a.z;
     let dy = a.w;
-    let tr = p.tr / (1.0 - alpha);
+    let inv = 1.0 / (1.0 - alpha);
+    let tr = p.tr * inv;
     p.tr = tr;
     let behind = p.last_alpha * p.last_color + (1.0 - p.last_alpha) * p.behind;
     p.behind = behind;
     p.last_color = color;
     p.last_alpha = alpha;
     let v_pix = p.v_pix;
-    let v_alpha = dot(color - behind, v_pix) * tr - p.t_final / (1.0 - alpha) * p.bg_dot;
+    let v_alpha = dot(color - behind, v_pix) * tr - p.t_bg * inv;
     (*acc).col += alpha * tr * v_pix;
     (*acc).touched = true;
     if (mo.z * g >= ALPHA_MAX) {

@@ -196,14 +196,21 @@ fn ssim_terms(@builtin(workgroup_id) wid: vec3<u32>, @builtin(num_workgroups) nw
     }
     s_sum[lid] = total;
     workgroupBarrier();
-    for (var off = 128u; off > 0u; off = off / 2u) {
-        if (lid < off) {
-            s_sum[lid] += s_sum[lid + off];
+    // Two-level sum (see `l1_grad` in loss.wgsl).
+    for (var i = lid; i < WORKGROUP_SIZE / 8u; i += WORKGROUP_SIZE) {
+        var a = 0.0;
+        for (var j = 0u; j < 8u; j++) {
+            a += s_sum[8u * i + j];
         }
-        workgroupBarrier();
+        s_sum[8u * i] = a;
     }
-    if (lid == 0u) {
-        partials[block] = s_sum[0];
+    workgroupBarrier();
+    for (var i = lid; i < 1u; i += WORKGROUP_SIZE) {
+        var a = 0.0;
+        for (var j = 0u; j < WORKGROUP_SIZE / 8u; j++) {
+            a += s_sum[8u * j];
+        }
+        partials[block] = a;
     }
 }
 
