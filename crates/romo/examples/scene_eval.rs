@@ -20,15 +20,28 @@ fn run() -> Res<()> {
     let out = std::env::var_os("OUT").map_or_else(|| dir.join("romo_eval"), PathBuf::from);
     let mut opts = common::romo_options()?;
     opts.out = Some(out.clone());
-    let scene = loader::scene::Scene::load(&dir, &Default::default())
-        .map_err(|e| format!("{}: {e}", dir.display()))?;
+    let downscale = match std::env::var("DOWNSCALE") {
+        Ok(v) => v
+            .parse::<u32>()
+            .map_err(|e| format!("DOWNSCALE={v}: {e}"))?,
+        Err(_) => 1,
+    };
+    let load = |downscale| {
+        loader::scene::Scene::load(&dir, &loader::scene::SceneOptions { downscale })
+            .map_err(|e| format!("{}: {e}", dir.display()))
+    };
+    let scene = load(downscale)?;
     let t = std::time::Instant::now();
     let rep = romo::segment_scene(&scene, &opts, &|_, _, _| {})?;
     let secs = t.elapsed().as_secs_f64();
     // Score the video frames only: split.json's `extra` views are clean
     // held-out images with empty ground truth and all-keep masks, which
     // would each count as a perfect J of 1.
-    let s = romo::evaluate_scene_masks(&scene, &out.join("masks"))?;
+    let s = if downscale == 1 {
+        romo::evaluate_scene_masks(&scene, &out.join("masks"))?
+    } else {
+        romo::evaluate_scene_masks(&load(1)?, &out.join("masks"))?
+    };
     let n = rep.frames.len().max(1) as f32;
     let u = rep.frames.iter().map(|f| f.u_coverage).sum::<f32>() / n;
     let l = rep.frames.iter().map(|f| f.l_coverage).sum::<f32>() / n;
