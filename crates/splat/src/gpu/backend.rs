@@ -184,6 +184,8 @@ struct LossOutputs {
     /// Σ g·S per block (mean SSIM); written only when `lambda > 0`.
     ssim_partials: wgpu::Buffer,
     blocks: usize,
+    /// Partial sums in `ssim_partials`.
+    ssim_blocks: usize,
     /// 1 / (3 · kept pixels), 0 when nothing is kept.
     norm: f64,
     /// D-SSIM weight λ.
@@ -234,7 +236,8 @@ impl StepKernels {
                 },
             },
         )?;
-        let ssim_partials = rec.storage("ssim_partials", blocks(pixels) as u64 * 4);
+        let ssim_blocks = super::ssim::partial_blocks(cam.width, cam.height);
+        let ssim_partials = rec.storage("ssim_partials", ssim_blocks as u64 * 4);
         if lambda > 0.0 {
             // D-SSIM on the device, added to the L1 gradient in v_image.
             let need = super::ssim::SCRATCH_MAPS * pixels as u64 * 4;
@@ -263,6 +266,7 @@ impl StepKernels {
             partials,
             ssim_partials,
             blocks: blocks(pixels) as usize,
+            ssim_blocks: ssim_blocks as usize,
             norm,
             lambda,
         })
@@ -419,7 +423,7 @@ fn read_step_stats(
     let lambda = loss.lambda;
     let mut ssim = 1.0f64;
     if lambda > 0.0 {
-        let p: Vec<f32> = ctx.read(&loss.ssim_partials, loss.blocks)?;
+        let p: Vec<f32> = ctx.read(&loss.ssim_partials, loss.ssim_blocks)?;
         ssim = p.iter().map(|&v| v as f64).sum();
     }
     let value = if kept > 0.0 {

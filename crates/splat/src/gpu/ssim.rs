@@ -3,18 +3,19 @@
 //! window, σ = 1.5, zero padding), the same formulation as the CPU
 //! `train::loss::loss_and_grad`, so a training step needs no image readback.
 //! Separable filters: 15 maps (x, y, x², y², xy per channel) are blurred
-//! horizontally then vertically, turned into weighted derivative maps (9),
-//! blurred again (the window is self-adjoint) and combined into dL/d image,
-//! which is added to the L1 gradient already in `v_image`.
+//! horizontally, then vertically together with the per-pixel SSIM terms
+//! into weighted derivative maps (9), which are blurred again the same way
+//! (the window is self-adjoint), the vertical pass adding dL/d image to the
+//! L1 gradient already in `v_image`.
 
 use super::kernel::{Recorder, groups_1d, kernel};
 use super::{GpuContext, GpuError};
 use crate::metrics::{SSIM_RADIUS, SSIM_SIGMA, gaussian_kernel};
 use bytemuck::{Pod, Zeroable};
 
-/// Invocations per workgroup (pixels per partial sum in `ssim_terms`).
+/// Invocations per workgroup.
 pub const WORKGROUP_SIZE: u32 = 256;
-/// Outputs per invocation of `blur_h` / `blur_v` (`SEG` in the shader).
+/// Outputs per invocation of the horizontal and vertical filters (`SEG` in the shader).
 pub const BLUR_SEGMENT: u32 = 32;
 /// Planar maps per scratch buffer (5 statistics × 3 channels).
 pub const SCRATCH_MAPS: u64 = 15;
@@ -25,7 +26,7 @@ pub const SCRATCH_MAPS: u64 = 15;
 pub struct SsimUniforms {
     pub width: u32,
     pub height: u32,
-    /// Maps (× channels) that `blur_h` / `blur_v` process.
+    /// Maps (× channels) that `blur_h` processes.
     pub n_maps: u32,
     pub has_mask: u32,
     /// 1 / (3 · Σ mask).
@@ -54,9 +55,8 @@ kernel! {
     entry_points {
         products: [WORKGROUP_SIZE],
         blur_h: [WORKGROUP_SIZE],
-        blur_v: [WORKGROUP_SIZE],
-        ssim_terms: [WORKGROUP_SIZE],
-        ssim_grad: [WORKGROUP_SIZE],
+        blur_v_terms: [WORKGROUP_SIZE],
+        blur_v_grad: [WORKGROUP_SIZE],
     }
     constants { WORKGROUP_SIZE, SEG = BLUR_SEGMENT }
 }
@@ -70,7 +70,8 @@ pub struct SsimArgs<'a> {
     pub has_mask: bool,
     /// dL/d image (`3·w·h`), holding the L1 gradient; the D-SSIM gradient is added.
     pub v_image: &'a wgpu::Buffer,
-    /// `ceil(w·h / 256)` f32 out: Σ g·S per block (Σ over blocks = mean SSIM).
+    /// [`partial_blocks`]`(w, h)` f32 out: Σ g·S per block (Σ over blocks =
+    /// mean SSIM).
     pub partials: &'a wgpu::Buffer,
     /// Two scratch buffers of at least `SCRATCH_MAPS · w · h` f32.
     pub scratch: [&'a wgpu::Buffer; 2],
@@ -79,6 +80,19 @@ pub struct SsimArgs<'a> {
     /// 1 / (3 · kept).
     pub norm: f32,
     pub lambda: f32,
+}
+
+/// Invocations of the vertical passes: one per (channel, segment of
+/// `BLUR_SEGMENT` rows, column).
+fn vertical_items(width: u32, height: u32) -> u32 {
+    3 * width * height.div_ceil(BLUR_SEGMENT)
+}
+
+/// Partial sums of g·S that [`Ssim::dispatch`] writes for a `width × height`
+/// image (one per workgroup of `blur_v_terms`).
+pub fn partial_blocks(width: u32, height: u32) -> u32 {
+    let g = groups_1d(vertical_items(width, height), WORKGROUP_SIZE);
+    g[0] * g[1]
 }
 
 /// The 11 Gaussian taps of the SSIM window as f32, padded to 12.
@@ -92,7 +106,7 @@ fn window_taps() -> [f32; 12] {
 }
 
 impl Ssim {
-    /// Record the seven dispatches.
+    /// Record the five dispatches.
     pub fn dispatch(
         &self,
         ctx: &GpuContext,
@@ -118,14 +132,12 @@ impl Ssim {
         };
         let [s0, s1] = a.scratch;
         // (entry, maps for the blurs, src, dst)
-        let plan: [(&'static str, u32, &wgpu::Buffer, &wgpu::Buffer); 7] = [
+        let plan: [(&'static str, u32, &wgpu::Buffer, &wgpu::Buffer); 5] = [
             ("products", 0, s1, s0),
             ("blur_h", 15, s0, s1),
-            ("blur_v", 15, s1, s0),
-            ("ssim_terms", 0, s0, s1),
-            ("blur_h", 9, s1, s0),
-            ("blur_v", 9, s0, s1),
-            ("ssim_grad", 0, s1, s0),
+            ("blur_v_terms", 0, s1, s0),
+            ("blur_h", 9, s0, s1),
+            ("blur_v_grad", 0, s1, s0),
         ];
         for (entry, maps, src, dst) in plan {
             let u = ctx.uniform(
@@ -135,10 +147,9 @@ impl Ssim {
                     ..base
                 },
             );
-            let seg = |len: u32| len.div_ceil(BLUR_SEGMENT);
             let items = match entry {
-                "blur_h" => maps * a.height * seg(a.width),
-                "blur_v" => maps * a.width * seg(a.height),
+                "blur_h" => maps * a.height * a.width.div_ceil(BLUR_SEGMENT),
+                "blur_v_terms" | "blur_v_grad" => vertical_items(a.width, a.height),
                 _ => n,
             };
             let b = SsimBindings {
@@ -172,7 +183,13 @@ mod tests {
         let Some(ctx) = crate::gpu::tests::ctx() else {
             return;
         };
-        let (w, h) = (37usize, 29usize);
+        // The second size spans several filter segments in both directions.
+        for (w, h) in [(37usize, 29usize), (41, 75)] {
+            check_loss_with_ssim(ctx, w, h);
+        }
+    }
+
+    fn check_loss_with_ssim(ctx: &GpuContext, w: usize, h: usize) {
         let n = w * h;
         let a = img(w, h, 0.0);
         let b = img(w, h, 0.9);
@@ -189,7 +206,8 @@ mod tests {
             let maskb = ctx.upload("mask", &mask);
             let v_image = ctx.storage("v_image", n as u64 * 12);
             let l1_parts = ctx.storage("l1_parts", blocks(n as u32) as u64 * 8);
-            let parts = ctx.storage("ssim_parts", blocks(n as u32) as u64 * 4);
+            let n_parts = partial_blocks(w as u32, h as u32) as usize;
+            let parts = ctx.storage("ssim_parts", n_parts as u64 * 4);
             let s0 = ctx.storage("s0", SCRATCH_MAPS * n as u64 * 4);
             let s1 = ctx.storage("s1", SCRATCH_MAPS * n as u64 * 4);
             let loss = Loss::new(ctx);
@@ -234,11 +252,11 @@ mod tests {
             .unwrap();
             rec.finish().unwrap();
             let g: Vec<f32> = ctx.read(&v_image, n * 3).unwrap();
-            let p: Vec<f32> = ctx.read(&parts, blocks(n as u32) as usize).unwrap();
+            let p: Vec<f32> = ctx.read(&parts, n_parts).unwrap();
             let ssim_gpu: f64 = p.iter().map(|&v| v as f64).sum();
             assert!(
                 (ssim_gpu - lv.ssim).abs() <= 1e-4,
-                "SSIM {ssim_gpu} vs CPU {} (mask {use_mask})",
+                "SSIM {ssim_gpu} vs CPU {} (mask {use_mask}, {w}×{h})",
                 lv.ssim
             );
             let gmax = grad.iter().fold(0.0f32, |m, v| m.max(v.abs()));
@@ -248,7 +266,7 @@ mod tests {
                 .fold(0.0f32, |m, (x, y)| m.max((x - y).abs()));
             assert!(
                 worst <= 1e-4 * gmax,
-                "gradient max abs error {worst} (max |grad| {gmax}, mask {use_mask})"
+                "gradient max abs error {worst} (max |grad| {gmax}, mask {use_mask}, {w}×{h})"
             );
         }
     }
