@@ -242,15 +242,19 @@ pub fn fast_guided_filter_rgb(i: &Rgb, p: &Plane, r: usize, eps: f32, s: usize) 
     // The coefficients upsampled as `Plane::resize` does (pixel-centre
     // aligned bilinear) and applied in one pass.
     let (fw, fh) = (i.w(), i.h());
-    let sx = w as f32 / fw as f32;
-    let sy = h as f32 / fh as f32;
+    let cols = crate::plane::resize_taps(fw, w);
+    let rows = crate::plane::resize_taps(fh, h);
     Plane::from_fn(fw, fh, |x, y| {
         let j = y * fw + x;
-        let [a0, a1, a2, bb] = Plane::bilinear4(
-            [&a[0], &a[1], &a[2], &b],
-            (x as f32 + 0.5) * sx - 0.5,
-            (y as f32 + 0.5) * sy - 0.5,
-        );
+        let (x0, x1, fx) = cols[x];
+        let (y0, y1, fy) = rows[y];
+        let (r0, r1) = (y0 * w, y1 * w);
+        let [a0, a1, a2, bb] = [&a[0], &a[1], &a[2], &b].map(|q| {
+            let d = &q.data;
+            let top = d[r0 + x0] + fx * (d[r0 + x1] - d[r0 + x0]);
+            let bottom = d[r1 + x0] + fx * (d[r1 + x1] - d[r1 + x0]);
+            top + fy * (bottom - top)
+        });
         a0 * i.c[0].data[j] + a1 * i.c[1].data[j] + a2 * i.c[2].data[j] + bb
     })
 }
@@ -338,12 +342,13 @@ pub fn upsample_probability(prob: &Plane, frame: &Rgb, o: &RefineOptions) -> Pla
     if o.radius == 0 {
         return up;
     }
-    let q = if o.colour_guide {
+    let mut q = if o.colour_guide {
         fast_guided_filter_rgb(frame, &up, o.radius, o.eps, o.subsample)
     } else {
         fast_guided_filter(&frame.gray(), &up, o.radius, o.eps, o.subsample)
     };
-    q.map(|v| v.clamp(0.0, 1.0))
+    q.data.iter_mut().for_each(|v| *v = v.clamp(0.0, 1.0));
+    q
 }
 
 /// The COLMAP-convention mask: 255 where static (keep), 0 where moving.

@@ -225,8 +225,10 @@ fn segment_source(
             let frame = src.frame(i)?;
             let prob = upsample_probability(&seg.probs[i], &frame, &opts.refine);
             let sized = match sizes.and_then(|s| s.get(i)) {
-                Some(&(w, h)) if (w, h) != (prob.w, prob.h) => prob.resize(w, h),
-                _ => prob.clone(),
+                Some(&(w, h)) if (w, h) != (prob.w, prob.h) => {
+                    std::borrow::Cow::Owned(prob.resize(w, h))
+                }
+                _ => std::borrow::Cow::Borrowed(&prob),
             };
             let keep = to_keep_mask(&sized, opts.refine.threshold);
             loader::masks::write_mask(loader::masks::mask_path(&masks_dir, &names[i]), &keep)?;

@@ -199,6 +199,32 @@ fn residuals(m: &TwoView, a: &[Pt], b: &[Pt]) -> Vec<f64> {
         .collect()
 }
 
+/// Fills `buf` with the residuals of `m` unless its median cannot be below
+/// `best` (false then; `buf` is left partly filled). The median is the
+/// `n/2`-th smallest residual in `f64::total_cmp` order, so it lies below
+/// `best` only when at least `n/2 + 1` residuals do: the fill stops once
+/// more than `n − n/2 − 1` residuals are not below it.
+fn residuals_may_beat(m: &TwoView, a: &[Pt], b: &[Pt], buf: &mut [f64], best: Option<f64>) -> bool {
+    let Some(best) = best else {
+        for (r, (p, q)) in buf.iter_mut().zip(a.iter().zip(b)) {
+            *r = m.residual_sq(*p, *q);
+        }
+        return true;
+    };
+    let allowed = buf.len() - (buf.len() / 2 + 1);
+    let mut not_below = 0;
+    for (r, (p, q)) in buf.iter_mut().zip(a.iter().zip(b)) {
+        *r = m.residual_sq(*p, *q);
+        if r.total_cmp(&best) != std::cmp::Ordering::Less {
+            not_below += 1;
+            if not_below > allowed {
+                return false;
+            }
+        }
+    }
+    true
+}
+
 /// LMedS for one model kind, then a least-squares refit on the inliers.
 fn lmeds(a: &[Pt], b: &[Pt], homography: bool, o: &RobustOptions, seed: u64) -> Option<Fit> {
     let s = if homography { 4 } else { 7 };
@@ -230,8 +256,8 @@ fn lmeds(a: &[Pt], b: &[Pt], homography: bool, o: &RobustOptions, seed: u64) -> 
                 .collect()
         };
         for m in models {
-            for (r, (p, q)) in buf.iter_mut().zip(a.iter().zip(b)) {
-                *r = m.residual_sq(*p, *q);
+            if !residuals_may_beat(&m, a, b, &mut buf, best.as_ref().map(|(_, bm)| *bm)) {
+                continue;
             }
             let med = median(&mut buf);
             if med.is_finite() && best.as_ref().is_none_or(|(_, bm)| med < *bm) {
