@@ -421,13 +421,7 @@ pub fn stages() -> [StageDef; 8] {
                     .is_none()
                     .then_some("every frame (scene folder or --all-frames)")
             },
-            inputs: |p| {
-                let mut v = vec![Input::Stat(p.images())];
-                if !p.no_masks {
-                    v.push(Input::Stat(p.masks()));
-                }
-                v
-            },
+            inputs: |p| images_and_masks(p, &p.scene),
             outputs: |p| vec![p.posed_scene().join("images")],
             options: |p| Ok(json!({ "keyframes": p.keyframes, "masks": !p.no_masks })),
             run: run_keyframes,
@@ -436,14 +430,7 @@ pub fn stages() -> [StageDef; 8] {
         StageDef {
             stage: Stage::Pose,
             skip: |p| p.keep_poses.then_some("kept the scene's poses"),
-            inputs: |p| {
-                let posed = p.posed_scene();
-                let mut v = vec![Input::Stat(posed.join("images"))];
-                if !p.no_masks {
-                    v.push(Input::Stat(posed.join("masks")));
-                }
-                v
-            },
+            inputs: |p| images_and_masks(p, &p.posed_scene()),
             outputs: |p| vec![p.sparse()],
             options: |p| Ok(serde_json::to_value(&p.colmap)?),
             run: |p, r, ctx| {
@@ -526,6 +513,15 @@ pub fn stages() -> [StageDef; 8] {
             restore: |_, _| Ok(()),
         },
     ]
+}
+
+/// `dir/images`, and `dir/masks` when the run uses masks.
+fn images_and_masks(p: &Plan, dir: &Path) -> Vec<Input> {
+    let mut v = vec![Input::Stat(dir.join("images"))];
+    if !p.no_masks {
+        v.push(Input::Stat(dir.join("masks")));
+    }
+    v
 }
 
 /// What a training stage reads: the posed (undistorted) scene, and the
