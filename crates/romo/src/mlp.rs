@@ -240,15 +240,14 @@ impl Mlp {
     pub fn predict(&self, x: &[f32]) -> Vec<f32> {
         let (w1, b1, w2, b2) = self.effective();
         let c = self.c_in;
+        let w1t = transpose_hidden(&w1, c);
         x.par_chunks(c.max(1))
             .map(|xi| {
+                let z1 = hidden_pre(&w1t, b1, xi);
                 let mut z2 = b2;
                 for j in 0..HIDDEN {
-                    let row = &w1[j * c..(j + 1) * c];
-                    let z: f64 =
-                        b1[j] + row.iter().zip(xi).map(|(w, v)| w * *v as f64).sum::<f64>();
-                    if z > 0.0 {
-                        z2 += w2[j] * z;
+                    if z1[j] > 0.0 {
+                        z2 += w2[j] * z1[j];
                     }
                 }
                 sigmoid(z2) as f32
@@ -273,6 +272,7 @@ impl Mlp {
             .filter(|l| **l == Label::Static)
             .count()
             .max(1) as f64;
+        let w1t = transpose_hidden(&w1, c);
         // Gradient w.r.t. effective weights: [Ŵ1, b1, Ŵ2, b2].
         let ne = HIDDEN * c + 2 * HIDDEN + 1;
         // Partial sums over fixed chunks of samples, added in order: the
@@ -284,11 +284,9 @@ impl Mlp {
             .map(|(xs, ls)| {
                 let (mut loss, mut g) = (0.0f64, vec![0.0f64; ne]);
                 for (xi, lab) in xs.chunks(c.max(1)).zip(ls) {
-                    let mut z1 = [0.0f64; HIDDEN];
+                    let z1 = hidden_pre(&w1t, b1, xi);
                     let mut z2 = b2;
                     for j in 0..HIDDEN {
-                        let row = &w1[j * c..(j + 1) * c];
-                        z1[j] = b1[j] + row.iter().zip(xi).map(|(w, v)| w * *v as f64).sum::<f64>();
                         if z1[j] > 0.0 {
                             z2 += w2[j] * z1[j];
                         }
@@ -409,6 +407,33 @@ pub struct TrainReport {
     /// True when the net calls (almost) everything one class: one of the
     /// recalls is below 5% while the other is above 95%.
     pub collapsed: bool,
+}
+
+/// The first layer's weights (`HIDDEN` rows of `c`) stored input-major,
+/// `w1t[k·HIDDEN + j] = w1[j·c + k]`, for [`hidden_pre`].
+fn transpose_hidden(w1: &[f64], c: usize) -> Vec<f64> {
+    (0..HIDDEN * c)
+        .map(|i| w1[(i % HIDDEN) * c + i / HIDDEN])
+        .collect()
+}
+
+/// The hidden units' pre-activations `b1[j] + Σ_k w1[j][k]·x[k]`, all units
+/// at once (the inner loop runs over the units, so it vectorises), each
+/// sum in input order from −0 as `Iterator::sum` adds: the same bits as
+/// summing each unit's row on its own.
+#[inline]
+fn hidden_pre(w1t: &[f64], b1: &[f64], xi: &[f32]) -> [f64; HIDDEN] {
+    let mut acc = [-0.0f64; HIDDEN];
+    for (w, v) in w1t.chunks_exact(HIDDEN).zip(xi) {
+        let v = *v as f64;
+        for j in 0..HIDDEN {
+            acc[j] += w[j] * v;
+        }
+    }
+    for j in 0..HIDDEN {
+        acc[j] = b1[j] + acc[j];
+    }
+    acc
 }
 
 /// Train `mlp` for `epochs` epochs of shuffled mini-batches; `anneal`

@@ -141,3 +141,25 @@ fn loss_gradient_does_not_depend_on_the_thread_count() {
         );
     }
 }
+
+/// The hidden layer computed for all units at once gives the bits of each
+/// unit's row summed on its own, as the network's forward pass defines it.
+#[test]
+fn hidden_pre_equals_row_sums() {
+    let c = 16;
+    let mut rng = rand_pcg::Pcg64::seed_from_u64(3);
+    let w1: Vec<f64> = (0..HIDDEN * c)
+        .map(|_| rng.random_range(-2.0..2.0))
+        .collect();
+    let b1: Vec<f64> = (0..HIDDEN).map(|_| rng.random_range(-1.0..1.0)).collect();
+    let w1t = transpose_hidden(&w1, c);
+    for _ in 0..200 {
+        let xi: Vec<f32> = (0..c).map(|_| rng.random_range(-3.0..3.0)).collect();
+        let z = hidden_pre(&w1t, &b1, &xi);
+        for j in 0..HIDDEN {
+            let row = &w1[j * c..(j + 1) * c];
+            let want = b1[j] + row.iter().zip(&xi).map(|(w, v)| w * *v as f64).sum::<f64>();
+            assert_eq!(z[j].to_bits(), want.to_bits(), "unit {j}");
+        }
+    }
+}
