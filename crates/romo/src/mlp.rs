@@ -430,8 +430,9 @@ fn hidden_pre(w1t: &[f64], b1: &[f64], xi: &[f32]) -> [f64; HIDDEN] {
             acc[j] += w[j] * v;
         }
     }
-    for j in 0..HIDDEN {
-        acc[j] = b1[j] + acc[j];
+    // IEEE addition commutes: the same bits as `b1[j] + Σ`.
+    for (a, b) in acc.iter_mut().zip(b1) {
+        *a += b;
     }
     acc
 }

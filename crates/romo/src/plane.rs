@@ -54,45 +54,25 @@ impl Plane {
     }
 
     /// The four taps and weights of a bilinear sample at (x, y), clamped to
-    /// the border: row offsets `r0`, `r1`, columns `x0`, `x1`, fractions.
+    /// the border.
     #[inline]
-    fn bilinear_taps(&self, x: f32, y: f32) -> (usize, usize, usize, usize, f32, f32) {
-        let xm = (self.w - 1) as f32;
-        let ym = (self.h - 1) as f32;
-        let x = x.clamp(0.0, xm);
-        let y = y.clamp(0.0, ym);
-        let x0 = x.floor();
-        let y0 = y.floor();
-        let fx = x - x0;
-        let fy = y - y0;
-        let x0 = x0 as usize;
-        let y0 = y0 as usize;
-        let x1 = (x0 + 1).min(self.w - 1);
-        let y1 = (y0 + 1).min(self.h - 1);
-        (y0 * self.w, y1 * self.w, x0, x1, fx, fy)
+    fn bilinear_taps(&self, x: f32, y: f32) -> Taps {
+        Taps::new(axis_tap(x, self.w), axis_tap(y, self.h), self.w)
     }
 
     /// Bilinear sample at continuous pixel coordinates (pixel centres at
     /// integers), clamped to the border.
     #[inline]
     pub fn bilinear(&self, x: f32, y: f32) -> f32 {
-        let (r0, r1, x0, x1, fx, fy) = self.bilinear_taps(x, y);
-        let a = self.data[r0 + x0] + fx * (self.data[r0 + x1] - self.data[r0 + x0]);
-        let b = self.data[r1 + x0] + fx * (self.data[r1 + x1] - self.data[r1 + x0]);
-        a + fy * (b - a)
+        self.bilinear_taps(x, y).sample(&self.data)
     }
 
     /// Bilinear samples of four planes of this plane's size at one point
     /// (each exactly [`Plane::bilinear`]'s value).
     #[inline]
     pub fn bilinear4(planes: [&Plane; 4], x: f32, y: f32) -> [f32; 4] {
-        let (r0, r1, x0, x1, fx, fy) = planes[0].bilinear_taps(x, y);
-        planes.map(|q| {
-            let d = &q.data;
-            let a = d[r0 + x0] + fx * (d[r0 + x1] - d[r0 + x0]);
-            let b = d[r1 + x0] + fx * (d[r1 + x1] - d[r1 + x0]);
-            a + fy * (b - a)
-        })
+        let t = planes[0].bilinear_taps(x, y);
+        planes.map(|q| t.sample(&q.data))
     }
 
     /// Resize with bilinear interpolation (pixel-centre aligned). When
@@ -108,14 +88,8 @@ impl Plane {
         }
         let cols = resize_taps(nw, src.w);
         let rows = resize_taps(nh, src.h);
-        let d = &src.data;
         Plane::from_fn(nw, nh, |x, y| {
-            let (x0, x1, fx) = cols[x];
-            let (y0, y1, fy) = rows[y];
-            let (r0, r1) = (y0 * src.w, y1 * src.w);
-            let a = d[r0 + x0] + fx * (d[r0 + x1] - d[r0 + x0]);
-            let b = d[r1 + x0] + fx * (d[r1 + x1] - d[r1 + x0]);
-            a + fy * (b - a)
+            Taps::new(cols[x], rows[y], src.w).sample(&src.data)
         })
     }
 
@@ -258,22 +232,65 @@ impl Plane {
     }
 }
 
+/// One axis of a bilinear sample at `c` on `n` pixels, clamped to the
+/// border: the two source indices and the fraction.
+#[inline]
+fn axis_tap(c: f32, n: usize) -> (usize, usize, f32) {
+    let m = n.saturating_sub(1);
+    let c = c.clamp(0.0, m as f32);
+    let c0 = c.floor();
+    let i0 = c0 as usize;
+    (i0, (i0 + 1).min(m), c - c0)
+}
+
 /// The bilinear taps of a pixel-centre aligned resize along one axis of
-/// `src` pixels to `n` pixels: per output index the two source indices and
-/// the fraction, exactly as [`Plane::bilinear`] computes them at
-/// `(i + 0.5)·src/n − 0.5` (so a resize with these tables gives the same
-/// bits while computing each coordinate once per row or column).
+/// `src` pixels to `n` pixels: per output index [`axis_tap`] at
+/// `(i + 0.5)·src/n − 0.5`, as [`Plane::bilinear`] samples there, computed
+/// once per row or column.
 pub fn resize_taps(n: usize, src: usize) -> Vec<(usize, usize, f32)> {
     let s = src as f32 / n as f32;
-    let m = src.saturating_sub(1);
     (0..n)
-        .map(|i| {
-            let c = ((i as f32 + 0.5) * s - 0.5).clamp(0.0, m as f32);
-            let c0 = c.floor();
-            let i0 = c0 as usize;
-            (i0, (i0 + 1).min(m), c - c0)
-        })
+        .map(|i| axis_tap((i as f32 + 0.5) * s - 0.5, src))
         .collect()
+}
+
+/// The four taps and weights of one bilinear sample in a plane `w` wide:
+/// row offsets `r0`, `r1`, columns `x0`, `x1`, fractions `fx`, `fy`.
+#[derive(Debug, Clone, Copy)]
+pub struct Taps {
+    r0: usize,
+    r1: usize,
+    x0: usize,
+    x1: usize,
+    fx: f32,
+    fy: f32,
+}
+
+impl Taps {
+    /// From the column and row taps (as [`resize_taps`] gives them).
+    #[inline]
+    pub fn new(
+        (x0, x1, fx): (usize, usize, f32),
+        (y0, y1, fy): (usize, usize, f32),
+        w: usize,
+    ) -> Self {
+        Taps {
+            r0: y0 * w,
+            r1: y1 * w,
+            x0,
+            x1,
+            fx,
+            fy,
+        }
+    }
+
+    /// The sample of the row-major data `d`.
+    #[inline]
+    pub fn sample(&self, d: &[f32]) -> f32 {
+        let a = d[self.r0 + self.x0] + self.fx * (d[self.r0 + self.x1] - d[self.r0 + self.x0]);
+        let b = d[self.r1 + self.x0] + self.fx * (d[self.r1 + self.x1] - d[self.r1 + self.x0]);
+        a + self.fy * (b - a)
+    }
 }
 
 /// An RGB image as three planes (values in [0, 1]).

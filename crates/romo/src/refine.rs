@@ -246,15 +246,8 @@ pub fn fast_guided_filter_rgb(i: &Rgb, p: &Plane, r: usize, eps: f32, s: usize) 
     let rows = crate::plane::resize_taps(fh, h);
     Plane::from_fn(fw, fh, |x, y| {
         let j = y * fw + x;
-        let (x0, x1, fx) = cols[x];
-        let (y0, y1, fy) = rows[y];
-        let (r0, r1) = (y0 * w, y1 * w);
-        let [a0, a1, a2, bb] = [&a[0], &a[1], &a[2], &b].map(|q| {
-            let d = &q.data;
-            let top = d[r0 + x0] + fx * (d[r0 + x1] - d[r0 + x0]);
-            let bottom = d[r1 + x0] + fx * (d[r1 + x1] - d[r1 + x0]);
-            top + fy * (bottom - top)
-        });
+        let t = crate::plane::Taps::new(cols[x], rows[y], w);
+        let [a0, a1, a2, bb] = [&a[0], &a[1], &a[2], &b].map(|q| t.sample(&q.data));
         a0 * i.c[0].data[j] + a1 * i.c[1].data[j] + a2 * i.c[2].data[j] + bb
     })
 }
