@@ -125,7 +125,6 @@ fn pure_rotation_video_is_scored_with_homographies() {
 fn masks_of_a_downscaled_scene_have_the_images_size() {
     let spec_path = Path::new(env!("CARGO_MANIFEST_DIR")).join("../../scenes/small.toml");
     let mut spec = loader::synth::load_spec(&spec_path).unwrap();
-    spec.frames = 8;
     spec.supersample = 1;
     let dir = tempfile::tempdir().unwrap();
     loader::synth::generate(&spec, dir.path()).unwrap();
@@ -153,12 +152,11 @@ fn masks_of_a_downscaled_scene_have_the_images_size() {
         "downscale 2: J {:.3} P {:.3} R {:.3}",
         m.j_mean, m.precision, m.recall
     );
-    // Seed 0: J 0.136, P 0.96, R 0.12 (8 frames at half size: a short,
-    // coarse video; this test is about the masks' size). At half size the
-    // small scene's pedestrians are a few grid pixels of flat colour, so
-    // few of their pixels can be U (`labels.u_min_gradient`).
+    // Seed 0: J 0.713, P 0.91, R 0.77 (30 frames at half size; with 8
+    // frames the pedestrians' motion is small beside the dolly's and the
+    // outcome depends on the seed, `docs/results.md`).
     assert!(
-        m.j_mean >= 0.08 && m.precision >= 0.8,
+        m.j_mean >= 0.5 && m.precision >= 0.8,
         "J {} P {}",
         m.j_mean,
         m.precision

@@ -115,22 +115,23 @@ impl DisOptions {
     }
 
     /// The mask stage's preset (`DisOptions::default()`): MEDIUM with the
-    /// finest level computed at full resolution (`finest_scale` 0) and patches every 2 px (`patch_stride` 2). The
+    /// finest level computed at full resolution (`finest_scale` 0). The
     /// pipeline runs DIS on frames of twice its working grid, so MEDIUM's
     /// half-resolution finest level only resolves the grid itself; thin and
     /// repetitively textured movers (the demo's striped and checked
     /// pedestrians) then get flow smoothed into the background, and
     /// labels and region completion lose them. Measured: demo scene J,
-    /// seeds 0 / 1 / 2, with MEDIUM 0.759 / 0.770 / 0.764, with this
-    /// preset 0.820 / 0.797 / 0.804 (finest level alone: 0.793 for seed 0; stride 1 0.802, patch 6
-    /// 0.812, patch 12 0.798, frames at 3× the grid 0.810); DAVIS mean J
-    /// 0.639 → 0.652 for seed 0 (camel 0.72 → 0.80, car-roundabout 0.74 →
-    /// 0.79; parkour 0.81 → 0.68 for this seed, 0.83 for seeds 1 and 2).
-    /// Costs ≈ 8× the flow time (DAVIS 854×480: 9 → 71–98 ms per frame).
+    /// seeds 0 / 1 / 2, with MEDIUM 0.759 / 0.770 / 0.764, with the finest
+    /// level at full resolution 0.793 for seed 0 (patches every 2 px: 0.820
+    /// / 0.797 / 0.804; every px 0.802, patch 6 0.812, patch 12 0.798,
+    /// frames at 3× the grid 0.810). Patches stay every 3 px as in MEDIUM:
+    /// every 2 px costs 1.5× the flow time for DAVIS mean J 0.702 vs 0.707
+    /// (seeds 0 / 1 / 2), fox + DAVIS composite J 0.624 vs 0.671 and demo J
+    /// 0.901 vs 0.892 (`docs/results.md`). The full-resolution finest level
+    /// costs ≈ 5× MEDIUM's flow time.
     pub fn masks() -> Self {
         Self {
             finest_scale: 0,
-            patch_stride: 2,
             ..Self::opencv_medium()
         }
     }
