@@ -125,10 +125,10 @@ impl DisOptions {
     /// level at full resolution 0.793 for seed 0 (patches every 2 px: 0.820
     /// / 0.797 / 0.804; every px 0.802, patch 6 0.812, patch 12 0.798,
     /// frames at 3× the grid 0.810). Patches stay every 3 px as in MEDIUM:
-    /// every 2 px costs 1.5× the flow time for DAVIS mean J 0.702 vs 0.707
-    /// (seeds 0 / 1 / 2), fox + DAVIS composite J 0.624 vs 0.671 and demo J
-    /// 0.901 vs 0.892 (`docs/results.md`). The full-resolution finest level
-    /// costs ≈ 5× MEDIUM's flow time.
+    /// every 2 px costs 1.5× the flow time (`bench mask` on DAVIS 854×480:
+    /// 137 vs 92 ms per frame) for DAVIS mean J 0.705 vs 0.707 (seeds 0 /
+    /// 1 / 2), fox + DAVIS composite J 0.624 vs 0.671 and demo J 0.901 vs
+    /// 0.892 (`docs/results.md`).
     pub fn masks() -> Self {
         Self {
             finest_scale: 0,
