@@ -12,6 +12,7 @@
 use super::Pt;
 use super::fundamental::{eight_point, sampson_sq, seven_point};
 use super::homography::{dlt, transfer_sq};
+use crate::flow::simd::multiversion;
 use nalgebra::Matrix3;
 use rand::{Rng, SeedableRng};
 use serde::{Deserialize, Serialize};
@@ -192,34 +193,121 @@ pub(crate) fn median(v: &mut [f64]) -> f64 {
     *m
 }
 
-fn residuals(m: &TwoView, a: &[Pt], b: &[Pt]) -> Vec<f64> {
-    a.iter()
-        .zip(b)
-        .map(|(p, q)| m.residual_sq(*p, *q))
-        .collect()
+/// Correspondences split into coordinate arrays, so the residual kernels
+/// run over contiguous lanes.
+struct Soa {
+    ax: Vec<f64>,
+    ay: Vec<f64>,
+    bx: Vec<f64>,
+    by: Vec<f64>,
 }
+
+impl Soa {
+    fn new(a: &[Pt], b: &[Pt]) -> Self {
+        Self {
+            ax: a.iter().map(|p| p[0]).collect(),
+            ay: a.iter().map(|p| p[1]).collect(),
+            bx: b.iter().map(|p| p[0]).collect(),
+            by: b.iter().map(|p| p[1]).collect(),
+        }
+    }
+
+    fn len(&self) -> usize {
+        self.ax.len()
+    }
+
+    /// Squared residuals (px²) of `m` for points `lo..lo + out.len()`.
+    fn residuals_into(&self, m: &TwoView, lo: usize, out: &mut [f64]) {
+        let hi = lo + out.len();
+        let (ax, ay) = (&self.ax[lo..hi], &self.ay[lo..hi]);
+        let (bx, by) = (&self.bx[lo..hi], &self.by[lo..hi]);
+        match m {
+            TwoView::Fundamental(f) => sampson_block(&row_major(f), ax, ay, bx, by, out),
+            TwoView::Homography(h) => transfer_block(&row_major(h), ax, ay, bx, by, out),
+        }
+    }
+
+    fn residuals(&self, m: &TwoView) -> Vec<f64> {
+        let mut r = vec![0.0; self.len()];
+        self.residuals_into(m, 0, &mut r);
+        r
+    }
+}
+
+fn row_major(m: &Matrix3<f64>) -> [f64; 9] {
+    std::array::from_fn(|k| m[(k / 3, k % 3)])
+}
+
+multiversion! {
+    /// [`sampson_sq`] of F (row-major `f`) for each point, with the same
+    /// operations in the same order (bit-identical; tested).
+    fn sampson_block(f: &[f64; 9], ax: &[f64], ay: &[f64], bx: &[f64], by: &[f64], out: &mut [f64]) {
+        let pts = ax.iter().zip(ay).zip(bx.iter().zip(by));
+        for (r, ((&x, &y), (&u, &v))) in out.iter_mut().zip(pts) {
+            let fa = [
+                f[0] * x + f[1] * y + f[2],
+                f[3] * x + f[4] * y + f[5],
+                f[6] * x + f[7] * y + f[8],
+            ];
+            let ftb = [f[0] * u + f[3] * v + f[6], f[1] * u + f[4] * v + f[7]];
+            let num = u * fa[0] + v * fa[1] + fa[2];
+            let den = fa[0] * fa[0] + fa[1] * fa[1] + ftb[0] * ftb[0] + ftb[1] * ftb[1];
+            *r = if den <= 1e-300 {
+                f64::INFINITY
+            } else {
+                num * num / den
+            };
+        }
+    }
+}
+
+multiversion! {
+    /// [`transfer_sq`] of H (row-major `h`) for each point, with the same
+    /// operations in the same order (bit-identical; tested).
+    fn transfer_block(h: &[f64; 9], ax: &[f64], ay: &[f64], bx: &[f64], by: &[f64], out: &mut [f64]) {
+        let pts = ax.iter().zip(ay).zip(bx.iter().zip(by));
+        for (r, ((&x, &y), (&u, &v))) in out.iter_mut().zip(pts) {
+            let p0 = h[0] * x + h[1] * y + h[2];
+            let p1 = h[3] * x + h[4] * y + h[5];
+            let p2 = h[6] * x + h[7] * y + h[8];
+            let (dx, dy) = (p0 / p2 - u, p1 / p2 - v);
+            *r = if p2.abs() < 1e-12 {
+                f64::INFINITY
+            } else {
+                dx * dx + dy * dy
+            };
+        }
+    }
+}
+
+fn residuals(m: &TwoView, a: &[Pt], b: &[Pt]) -> Vec<f64> {
+    Soa::new(a, b).residuals(m)
+}
+
+/// Points per block of [`residuals_may_beat`] between its early-exit checks.
+const BLOCK: usize = 64;
 
 /// Fills `buf` with the residuals of `m` unless its median cannot be below
 /// `best` (false then; `buf` is left partly filled). The median is the
 /// `n/2`-th smallest residual in `f64::total_cmp` order, so it lies below
-/// `best` only when at least `n/2 + 1` residuals do: the fill stops once
-/// more than `n − n/2 − 1` residuals are not below it.
-fn residuals_may_beat(m: &TwoView, a: &[Pt], b: &[Pt], buf: &mut [f64], best: Option<f64>) -> bool {
+/// `best` only when at least `n/2 + 1` residuals do: the fill stops, at the
+/// end of a block of points, once more than `n − n/2 − 1` residuals are not
+/// below it.
+fn residuals_may_beat(m: &TwoView, pts: &Soa, buf: &mut [f64], best: Option<f64>) -> bool {
     let Some(best) = best else {
-        for (r, (p, q)) in buf.iter_mut().zip(a.iter().zip(b)) {
-            *r = m.residual_sq(*p, *q);
-        }
+        pts.residuals_into(m, 0, buf);
         return true;
     };
     let allowed = buf.len() - (buf.len() / 2 + 1);
     let mut not_below = 0;
-    for (r, (p, q)) in buf.iter_mut().zip(a.iter().zip(b)) {
-        *r = m.residual_sq(*p, *q);
-        if r.total_cmp(&best) != std::cmp::Ordering::Less {
-            not_below += 1;
-            if not_below > allowed {
-                return false;
-            }
+    for (k, block) in buf.chunks_mut(BLOCK).enumerate() {
+        pts.residuals_into(m, k * BLOCK, block);
+        not_below += block
+            .iter()
+            .filter(|r| r.total_cmp(&best) != std::cmp::Ordering::Less)
+            .count();
+        if not_below > allowed {
+            return false;
         }
     }
     true
@@ -235,6 +323,7 @@ fn lmeds(a: &[Pt], b: &[Pt], homography: bool, o: &RobustOptions, seed: u64) -> 
     let mut rng = rand_pcg::Pcg64::seed_from_u64(seed);
     let mut best: Option<(TwoView, f64)> = None;
     let mut idx = [0usize; 7];
+    let pts = Soa::new(a, b);
     let mut buf = vec![0.0f64; n];
     for _ in 0..o.iterations {
         let mut k = 0;
@@ -256,7 +345,7 @@ fn lmeds(a: &[Pt], b: &[Pt], homography: bool, o: &RobustOptions, seed: u64) -> 
                 .collect()
         };
         for m in models {
-            if !residuals_may_beat(&m, a, b, &mut buf, best.as_ref().map(|(_, bm)| *bm)) {
+            if !residuals_may_beat(&m, &pts, &mut buf, best.as_ref().map(|(_, bm)| *bm)) {
                 continue;
             }
             let med = median(&mut buf);
@@ -271,7 +360,7 @@ fn lmeds(a: &[Pt], b: &[Pt], homography: bool, o: &RobustOptions, seed: u64) -> 
     // Least-squares refit on the inliers; kept when it does not worsen the
     // median.
     let thr = (o.inlier_sigmas * sigma_of(med)).powi(2);
-    let r = residuals(&model, a, b);
+    let r = pts.residuals(&model);
     let (ia, ib): (Vec<Pt>, Vec<Pt>) = r
         .iter()
         .enumerate()
@@ -284,7 +373,7 @@ fn lmeds(a: &[Pt], b: &[Pt], homography: bool, o: &RobustOptions, seed: u64) -> 
         eight_point(&ia, &ib).map(TwoView::Fundamental)
     };
     if let Some(m2) = refit {
-        let med2 = median(&mut residuals(&m2, a, b));
+        let med2 = median(&mut pts.residuals(&m2));
         if med2 <= med {
             model = m2;
             med = med2;
@@ -292,7 +381,7 @@ fn lmeds(a: &[Pt], b: &[Pt], homography: bool, o: &RobustOptions, seed: u64) -> 
     }
     let sigma = sigma_of(med);
     let thr = (o.inlier_sigmas * sigma).powi(2);
-    let inliers = residuals(&model, a, b).iter().filter(|r| **r < thr).count();
+    let inliers = pts.residuals(&model).iter().filter(|r| **r < thr).count();
     Some(Fit {
         model,
         median_sq: med,
@@ -397,4 +486,45 @@ pub fn fit_two_view_all(a: &[Pt], b: &[Pt], o: &RobustOptions) -> crate::Result<
         fundamental: f.model,
         fundamental_report: report_of(&f, a.len(), o, gf, gh),
     })
+}
+
+#[cfg(test)]
+mod tests {
+    #![allow(clippy::unwrap_used)]
+    use super::*;
+    use rand::Rng;
+
+    /// The block kernels give exactly the scalar residuals, on both
+    /// instruction-set paths, including the degenerate (infinite) ones.
+    #[test]
+    fn block_residuals_equal_the_scalar_ones_bit_for_bit() {
+        let mut rng = rand_pcg::Pcg64::seed_from_u64(7);
+        let mut pt = || [rng.random_range(-50.0..900.0), rng.random_range(-50.0..500.0)];
+        let n = 1000;
+        let a: Vec<Pt> = (0..n).map(|_| pt()).collect();
+        let b: Vec<Pt> = (0..n).map(|_| pt()).collect();
+        let mut rng = rand_pcg::Pcg64::seed_from_u64(8);
+        let mut models = Vec::new();
+        for _ in 0..20 {
+            let m = Matrix3::from_fn(|_, _| rng.random_range(-1.0..1.0));
+            models.push(TwoView::Fundamental(m));
+            models.push(TwoView::Homography(m));
+        }
+        // Degenerate: a zero F and an H mapping every point to infinity.
+        models.push(TwoView::Fundamental(Matrix3::zeros()));
+        models.push(TwoView::Homography(Matrix3::new(
+            1.0, 0.0, 0.0, 0.0, 1.0, 0.0, 0.0, 0.0, 0.0,
+        )));
+        let pts = Soa::new(&a, &b);
+        for baseline in [false, true] {
+            crate::flow::simd::force_baseline(baseline);
+            for m in &models {
+                let block = pts.residuals(m);
+                for (i, r) in block.iter().enumerate() {
+                    assert_eq!(r.to_bits(), m.residual_sq(a[i], b[i]).to_bits(), "{m:?} point {i}");
+                }
+            }
+        }
+        crate::flow::simd::force_baseline(false);
+    }
 }
