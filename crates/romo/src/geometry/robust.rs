@@ -499,7 +499,12 @@ mod tests {
     #[test]
     fn block_residuals_equal_the_scalar_ones_bit_for_bit() {
         let mut rng = rand_pcg::Pcg64::seed_from_u64(7);
-        let mut pt = || [rng.random_range(-50.0..900.0), rng.random_range(-50.0..500.0)];
+        let mut pt = || {
+            [
+                rng.random_range(-50.0..900.0),
+                rng.random_range(-50.0..500.0),
+            ]
+        };
         let n = 1000;
         let a: Vec<Pt> = (0..n).map(|_| pt()).collect();
         let b: Vec<Pt> = (0..n).map(|_| pt()).collect();
@@ -521,7 +526,11 @@ mod tests {
             for m in &models {
                 let block = pts.residuals(m);
                 for (i, r) in block.iter().enumerate() {
-                    assert_eq!(r.to_bits(), m.residual_sq(a[i], b[i]).to_bits(), "{m:?} point {i}");
+                    assert_eq!(
+                        r.to_bits(),
+                        m.residual_sq(a[i], b[i]).to_bits(),
+                        "{m:?} point {i}"
+                    );
                 }
             }
         }
