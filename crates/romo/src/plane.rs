@@ -113,13 +113,8 @@ impl Plane {
         if sigma <= 0.0 {
             return self.clone();
         }
-        let r = (3.0 * sigma).ceil() as isize;
-        let mut k: Vec<f32> = (-r..=r)
-            .map(|i| (-(i * i) as f32 / (2.0 * sigma * sigma)).exp())
-            .collect();
-        let s: f32 = k.iter().sum();
-        k.iter_mut().for_each(|v| *v /= s);
-        let (w, h, r) = (self.w, self.h, r as usize);
+        let k = gaussian_kernel(sigma);
+        let (w, h, r) = (self.w, self.h, k.len() / 2);
         if w == 0 || h == 0 {
             return self.clone();
         }
@@ -304,6 +299,18 @@ impl Taps {
     }
 }
 
+/// The normalised taps of a Gaussian with standard deviation `sigma` px,
+/// radius ⌈3σ⌉ (`2r + 1` taps).
+fn gaussian_kernel(sigma: f32) -> Vec<f32> {
+    let r = (3.0 * sigma).ceil() as isize;
+    let mut k: Vec<f32> = (-r..=r)
+        .map(|i| (-(i * i) as f32 / (2.0 * sigma * sigma)).exp())
+        .collect();
+    let s: f32 = k.iter().sum();
+    k.iter_mut().for_each(|v| *v /= s);
+    k
+}
+
 crate::flow::simd::multiversion! {
     /// `out[x] += k · src[x]`: one tap of [`Plane::gaussian`], added in
     /// tap order per pixel (the order of a per-pixel loop over the taps).
@@ -405,12 +412,8 @@ mod tests {
         for baseline in [false, true] {
             crate::flow::simd::force_baseline(baseline);
             for sigma in [0.8f32, 1.0, 2.0, 6.0] {
-                let r = (3.0 * sigma).ceil() as isize;
-                let mut k: Vec<f32> = (-r..=r)
-                    .map(|i| (-(i * i) as f32 / (2.0 * sigma * sigma)).exp())
-                    .collect();
-                let s: f32 = k.iter().sum();
-                k.iter_mut().for_each(|v| *v /= s);
+                let k = gaussian_kernel(sigma);
+                let r = (k.len() / 2) as isize;
                 let conv = |p: &Plane, dx: isize, dy: isize| {
                     Plane::from_fn(p.w, p.h, |x, y| {
                         let mut acc = 0.0;
