@@ -120,16 +120,19 @@ impl Plane {
         }
         // Horizontal pass on rows padded by r edge values on both sides.
         let mut tmp = vec![0.0f32; w * h];
-        tmp.par_chunks_mut(w).enumerate().for_each(|(y, out)| {
-            let row = &self.data[y * w..(y + 1) * w];
-            let mut padded = Vec::with_capacity(w + 2 * r);
-            padded.extend(std::iter::repeat_n(row[0], r));
-            padded.extend_from_slice(row);
-            padded.extend(std::iter::repeat_n(row[w - 1], r));
-            for (j, &kv) in k.iter().enumerate() {
-                axpy(kv, &padded[j..j + w], out);
-            }
-        });
+        let scratch = || Vec::with_capacity(w + 2 * r);
+        tmp.par_chunks_mut(w)
+            .enumerate()
+            .for_each_init(scratch, |padded, (y, out)| {
+                let row = &self.data[y * w..(y + 1) * w];
+                padded.clear();
+                padded.extend(std::iter::repeat_n(row[0], r));
+                padded.extend_from_slice(row);
+                padded.extend(std::iter::repeat_n(row[w - 1], r));
+                for (j, &kv) in k.iter().enumerate() {
+                    axpy(kv, &padded[j..j + w], out);
+                }
+            });
         // Vertical pass: row y sums the clamped rows y − r ..= y + r.
         let mut data = vec![0.0f32; w * h];
         data.par_chunks_mut(w).enumerate().for_each(|(y, out)| {
