@@ -1,13 +1,15 @@
-//! Run-time instruction-set dispatch for the flow kernels. The release
-//! build targets baseline x86-64 (SSE2, 4 lanes), so the 8-wide loops of
-//! the patch search, the densification, the variational refinement and the
+//! Run-time instruction-set dispatch for the flow kernels (and the LMedS
+//! residuals and the Gaussian blur, which use it too). The release build
+//! targets baseline x86-64 (SSE2, 4 lanes), so the 8-wide loops of the
+//! patch search, the densification, the variational refinement and the
 //! SOR solver would run at half width. Each hot function is declared
 //! through [`multiversion!`], which compiles its body a second time with
 //! AVX2 enabled (closures inside the body, e.g. the per-row bodies handed
 //! to rayon, inherit that) and picks the copy at run time. Only the vector
 //! width changes: Rust never contracts `a * b + c` into a fused
 //! multiply–add or reorders floating-point arithmetic, so both copies
-//! compute bit-identical results (tested in `dis`).
+//! compute bit-identical results (tested in `dis`, `geometry::robust`
+//! and `plane`).
 
 use std::sync::atomic::{AtomicBool, Ordering};
 
