@@ -280,10 +280,6 @@ multiversion! {
     }
 }
 
-fn residuals(m: &TwoView, a: &[Pt], b: &[Pt]) -> Vec<f64> {
-    Soa::new(a, b).residuals(m)
-}
-
 /// Points per block of [`residuals_may_beat`] between its early-exit checks.
 const BLOCK: usize = 64;
 
@@ -314,7 +310,15 @@ fn residuals_may_beat(m: &TwoView, pts: &Soa, buf: &mut [f64], best: Option<f64>
 }
 
 /// LMedS for one model kind, then a least-squares refit on the inliers.
-fn lmeds(a: &[Pt], b: &[Pt], homography: bool, o: &RobustOptions, seed: u64) -> Option<Fit> {
+/// `pts` holds the same correspondences as `a`, `b`.
+fn lmeds(
+    a: &[Pt],
+    b: &[Pt],
+    pts: &Soa,
+    homography: bool,
+    o: &RobustOptions,
+    seed: u64,
+) -> Option<Fit> {
     let s = if homography { 4 } else { 7 };
     let n = a.len();
     if n < s + 1 {
@@ -323,7 +327,6 @@ fn lmeds(a: &[Pt], b: &[Pt], homography: bool, o: &RobustOptions, seed: u64) -> 
     let mut rng = rand_pcg::Pcg64::seed_from_u64(seed);
     let mut best: Option<(TwoView, f64)> = None;
     let mut idx = [0usize; 7];
-    let pts = Soa::new(a, b);
     let mut buf = vec![0.0f64; n];
     for _ in 0..o.iterations {
         let mut k = 0;
@@ -345,7 +348,7 @@ fn lmeds(a: &[Pt], b: &[Pt], homography: bool, o: &RobustOptions, seed: u64) -> 
                 .collect()
         };
         for m in models {
-            if !residuals_may_beat(&m, &pts, &mut buf, best.as_ref().map(|(_, bm)| *bm)) {
+            if !residuals_may_beat(&m, pts, &mut buf, best.as_ref().map(|(_, bm)| *bm)) {
                 continue;
             }
             let med = median(&mut buf);
@@ -372,16 +375,20 @@ fn lmeds(a: &[Pt], b: &[Pt], homography: bool, o: &RobustOptions, seed: u64) -> 
     } else {
         eight_point(&ia, &ib).map(TwoView::Fundamental)
     };
+    // The chosen model's residuals (in any order: only counted below).
+    let mut chosen = r;
     if let Some(m2) = refit {
-        let med2 = median(&mut pts.residuals(&m2));
+        let mut r2 = pts.residuals(&m2);
+        let med2 = median(&mut r2);
         if med2 <= med {
             model = m2;
             med = med2;
+            chosen = r2;
         }
     }
     let sigma = sigma_of(med);
     let thr = (o.inlier_sigmas * sigma).powi(2);
-    let inliers = pts.residuals(&model).iter().filter(|r| **r < thr).count();
+    let inliers = chosen.iter().filter(|r| **r < thr).count();
     Some(Fit {
         model,
         median_sq: med,
@@ -451,26 +458,24 @@ pub fn fit_two_view_all(a: &[Pt], b: &[Pt], o: &RobustOptions) -> crate::Result<
             a.len().min(b.len())
         )));
     }
-    let f = lmeds(a, b, false, o, o.seed)
+    let pts = Soa::new(a, b);
+    let f = lmeds(a, b, &pts, false, o, o.seed)
         .ok_or_else(|| crate::RomoError::Geometry("fundamental matrix: degenerate".into()))?;
     let h = match o.selection {
         ModelSelection::Fundamental => None,
-        _ => lmeds(a, b, true, o, o.seed ^ 0x9e37_79b9),
+        _ => lmeds(a, b, &pts, true, o, o.seed ^ 0x9e37_79b9),
     };
     let (mut gf, mut gh) = (f64::NAN, f64::NAN);
     let use_h = match (&h, o.selection) {
         (Some(h), ModelSelection::Gric) => {
             let sigma = f.sigma;
-            gf = gric(&residuals(&f.model, a, b), sigma, 3.0, 7.0);
-            gh = gric(&residuals(&h.model, a, b), sigma, 2.0, 8.0);
+            gf = gric(&pts.residuals(&f.model), sigma, 3.0, 7.0);
+            gh = gric(&pts.residuals(&h.model), sigma, 2.0, 8.0);
             gh < gf
         }
         (Some(h), ModelSelection::InlierRatio) => {
             let thr = (o.inlier_sigmas * f.sigma).powi(2);
-            let hin = residuals(&h.model, a, b)
-                .iter()
-                .filter(|r| **r < thr)
-                .count();
+            let hin = pts.residuals(&h.model).iter().filter(|r| **r < thr).count();
             hin as f64 >= o.h_inlier_ratio * f.inliers as f64
         }
         (Some(_), ModelSelection::Homography) => true,
