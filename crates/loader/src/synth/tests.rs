@@ -331,7 +331,7 @@ fn gt_motion_marks_exactly_where_frame_differs_from_clean() {
 
 #[test]
 fn shipped_specs_parse_and_validate() {
-    for name in ["small.toml", "demo.toml", "rotation.toml"] {
+    for name in ["small.toml", "demo.toml", "rotation.toml", "follow.toml"] {
         let s = load_spec(repo_scene(name)).unwrap();
         assert!(!s.pedestrians.is_empty(), "{name}");
     }
@@ -523,4 +523,54 @@ fn rotation_spec_never_translates_and_test_views_leave_the_path() {
             .fold(f64::INFINITY, f64::min);
         assert!(d > 0.15, "test view {d} m from the training path");
     }
+}
+
+/// `scenes/follow.toml` is a camera that follows its pedestrian: the
+/// pedestrian's image centroid stays within a few pixels over the video
+/// (the legs swing), while a static point at the pedestrian's depth sweeps
+/// across most of the image.
+#[test]
+fn follow_spec_keeps_the_pedestrian_still_in_the_image() {
+    let mut spec = load_spec(repo_scene("follow.toml")).unwrap();
+    spec.supersample = 1;
+    spec.test_views = 0;
+    spec.points3d = 10;
+    let dir = tempfile::tempdir().unwrap();
+    generate(&spec, dir.path()).unwrap();
+    let mut xs = Vec::new();
+    for i in 0..spec.frames as usize {
+        let mask = image::open(dir.path().join("gt_motion").join(format!("{i:05}.png")))
+            .unwrap()
+            .to_luma8();
+        let (mut n, mut sx) = (0usize, 0usize);
+        for (x, _, p) in mask.enumerate_pixels() {
+            if p[0] == 255 {
+                n += 1;
+                sx += x as usize;
+            }
+        }
+        assert!(n > 500, "frame {i}: the pedestrian covers only {n} px");
+        xs.push(sx as f64 / n as f64);
+    }
+    let span = |v: &[f64]| {
+        v.iter().fold(f64::NEG_INFINITY, |a, b| a.max(*b))
+            - v.iter().fold(f64::INFINITY, |a, b| a.min(*b))
+    };
+    assert!(
+        span(&xs) < 10.0,
+        "pedestrian centroid moves {} px",
+        span(&xs)
+    );
+    // A static point where the pedestrian starts, at hip height.
+    let intr = intrinsics(&spec);
+    let p = &spec.pedestrians[0];
+    let x = Vector3::new(p.start[0], p.start[1], 0.9);
+    let us: Vec<f64> = path::training_poses(&spec)
+        .iter()
+        .map(|pose| {
+            let c = pose.transform(x);
+            intr.fx * c.x / c.z + intr.cx
+        })
+        .collect();
+    assert!(span(&us) > 150.0, "a static point moves {} px", span(&us));
 }
