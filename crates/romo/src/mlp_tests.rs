@@ -163,3 +163,45 @@ fn hidden_pre_equals_row_sums() {
         }
     }
 }
+
+/// One start is plain training of `Mlp::new(c, init_seed)`; several keep
+/// the start whose last epoch has the lowest loss, and that is the lowest
+/// of the starts trained one by one.
+#[test]
+fn restarts_keep_the_start_with_the_lowest_final_loss() {
+    let c = 4;
+    let (x, l) = toy(1500, c, 5);
+    let mut o = MlpOptions {
+        batch_size: 256,
+        ..Default::default()
+    };
+    let (one, r1) = train_restarts(c, &x, &l, 6, &o, 3, 9);
+    let mut plain = Mlp::new(c, 3);
+    let rp = train(&mut plain, &x, &l, 6, true, &o, 9);
+    assert_eq!(one.p, plain.p);
+    assert_eq!(r1.loss, rp.loss);
+
+    o.restarts = 4;
+    let (best, rb) = train_restarts(c, &x, &l, 6, &o, 3, 9);
+    let finals: Vec<f64> = (0..4u64)
+        .map(|j| {
+            let mut m = Mlp::new(c, 3 ^ (j << 40));
+            *train(&mut m, &x, &l, 6, true, &o, 9 ^ (j << 40))
+                .loss
+                .last()
+                .unwrap()
+        })
+        .collect();
+    let min = finals.iter().copied().fold(f64::INFINITY, f64::min);
+    assert_eq!(*rb.loss.last().unwrap(), min, "{finals:?}");
+    // The starts differ, so the choice is a real one.
+    assert!(finals.iter().any(|f| *f != finals[0]), "{finals:?}");
+    assert_eq!(best.predict(&x), {
+        let j = finals.iter().position(|f| *f == min).unwrap() as u64;
+        let mut m = Mlp::new(c, 3 ^ (j << 40));
+        train(&mut m, &x, &l, 6, true, &o, 9 ^ (j << 40));
+        m.predict(&x)
+    });
+    o.restarts = 0;
+    assert!(o.validate().is_err());
+}

@@ -14,7 +14,7 @@ use crate::labels::{
     FrameLabels, LabelOptions, PairFit, Side, apply_three_view, cycle_valid, fit_pair,
     frame_labels, occlusion_violations, propagate_u, three_view_residuals,
 };
-use crate::mlp::{Label, Mlp, MlpOptions, TrainReport, train};
+use crate::mlp::{Label, Mlp, MlpOptions, TrainReport, train, train_restarts};
 use crate::objects::{Evidence, ObjectMethod, graph_cut};
 use crate::plane::{Plane, Rgb};
 use crate::refine::{RefineOptions, temporal_smooth, temporal_smooth_flow};
@@ -954,15 +954,29 @@ fn train_rounds(
         progress("mlp", round, o.iterations);
         let rep = tm.time("mlp", || {
             let (x, y) = samples(pr, &labels, &keep, o, round);
-            train(
-                &mut mlp,
-                &x,
-                &y,
-                o.mlp.epochs_per_round,
-                round == 0,
-                &o.mlp,
-                o.seed ^ round as u64,
-            )
+            if round == 0 {
+                let (m, r) = train_restarts(
+                    pr.c,
+                    &x,
+                    &y,
+                    o.mlp.epochs_per_round,
+                    &o.mlp,
+                    o.seed ^ 0x11,
+                    o.seed,
+                );
+                mlp = m;
+                r
+            } else {
+                train(
+                    &mut mlp,
+                    &x,
+                    &y,
+                    o.mlp.epochs_per_round,
+                    false,
+                    &o.mlp,
+                    o.seed ^ round as u64,
+                )
+            }
         });
         report.rounds.push(rep);
         probs = tm.time("mlp", || pr.feats.iter().map(|f| mlp.predict(f)).collect());

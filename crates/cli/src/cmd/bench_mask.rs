@@ -22,7 +22,8 @@ pub struct Args {
     /// Use at most this many frames of `--images`.
     #[arg(long)]
     pub max_frames: Option<usize>,
-    /// Options as a (partial) RomoOptions JSON, e.g. '{"grid_max_side": 192}'.
+    /// Options as a (partial) RomoOptions JSON, e.g. '{"grid_max_side": 192}',
+    /// or a file holding one.
     #[arg(long)]
     pub options: Option<String>,
     /// Frames to generate when no scene is given.
@@ -84,7 +85,7 @@ fn image_files(dir: &std::path::Path, max: Option<usize>) -> anyhow::Result<Vec<
 pub fn run(args: &Args, ctx: &Ctx) -> anyhow::Result<serde_json::Value> {
     let out = std::env::temp_dir().join(format!("romosplat-bench-mask-out-{}", std::process::id()));
     let mut opts: romo::RomoOptions = match &args.options {
-        Some(js) => serde_json::from_str(js).context("--options: not a RomoOptions JSON")?,
+        Some(js) => super::mask::options_arg(std::path::Path::new(js))?,
         None => Default::default(),
     };
     opts.out = Some(out.clone());

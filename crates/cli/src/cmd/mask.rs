@@ -11,7 +11,8 @@ pub struct Args {
     /// Scene folder (with `images/`).
     #[arg(long)]
     pub scene: PathBuf,
-    /// Full options as JSON (a partial `RomoOptions`; the flags override it).
+    /// Full options as a JSON file, or the JSON itself (`'{"seed": 1}'`):
+    /// a partial `RomoOptions`; the flags override it.
     #[arg(long)]
     pub options: Option<PathBuf>,
     /// Integer downscale of the frames on load (masks are still written at
@@ -42,13 +43,32 @@ pub fn run(args: &Args, ctx: &Ctx) -> anyhow::Result<serde_json::Value> {
 /// A `RomoOptions` JSON file (a partial one: missing fields keep their defaults).
 pub fn read_options(path: &Path) -> anyhow::Result<romo::RomoOptions> {
     let s = std::fs::read_to_string(path).with_context(|| format!("{}", path.display()))?;
-    serde_json::from_str(&s).with_context(|| format!("{}: not a RomoOptions JSON", path.display()))
+    parse_options(&s).with_context(|| format!("{}: not a RomoOptions JSON", path.display()))
 }
 
-/// The RoMo options these flags select (`--options` file, then the flags).
+/// A partial `RomoOptions` from JSON text. Only an object: serde would also
+/// fill a struct from an array, field by field in declaration order.
+fn parse_options(s: &str) -> anyhow::Result<romo::RomoOptions> {
+    let v: serde_json::Value = serde_json::from_str(s)?;
+    anyhow::ensure!(v.is_object(), "expected a JSON object");
+    Ok(serde_json::from_value(v)?)
+}
+
+/// `--options`: the JSON itself when the argument starts with `{`, else a
+/// JSON file ([`read_options`]).
+pub fn options_arg(arg: &Path) -> anyhow::Result<romo::RomoOptions> {
+    match arg.to_str().map(str::trim_start) {
+        Some(js) if js.starts_with('{') => {
+            parse_options(js).context("--options: not a RomoOptions JSON")
+        }
+        _ => read_options(arg),
+    }
+}
+
+/// The RoMo options these flags select (`--options`, then the flags).
 pub fn options(args: &Args) -> anyhow::Result<romo::RomoOptions> {
     let base = match &args.options {
-        Some(p) => read_options(p)?,
+        Some(p) => options_arg(p)?,
         None => romo::RomoOptions::default(),
     };
     Ok(args.romo.over(base)?)
@@ -155,4 +175,36 @@ fn write_transforms_copy(
         &out.join("masks"),
         stage,
     )?))
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    /// `--options` takes the JSON itself or a file holding it; either way a
+    /// bad one is a one-line error naming `--options` or the file.
+    #[test]
+    fn options_are_inline_json_or_a_file() {
+        let inline = options_arg(Path::new(r#" {"seed": 7, "mlp": {"restarts": 3}}"#)).unwrap();
+        assert_eq!((inline.seed, inline.mlp.restarts), (7, 3));
+        let dir = tempfile::tempdir().unwrap();
+        let f = dir.path().join("o.json");
+        std::fs::write(&f, r#"{"seed": 7, "mlp": {"restarts": 3}}"#).unwrap();
+        let file = options_arg(&f).unwrap();
+        assert_eq!((file.seed, file.mlp.restarts), (7, 3));
+        let e = format!("{:#}", options_arg(Path::new("{seed: 7}")).unwrap_err());
+        assert!(e.starts_with("--options: not a RomoOptions JSON"), "{e}");
+        // An array would fill the struct's fields in order.
+        std::fs::write(&f, "[1]").unwrap();
+        let e = format!("{:#}", options_arg(&f).unwrap_err());
+        assert!(e.contains("o.json: not a RomoOptions JSON"), "{e}");
+        std::fs::write(&f, r#"{"seed": "x"}"#).unwrap();
+        let e = format!("{:#}", options_arg(&f).unwrap_err());
+        assert!(e.contains("o.json: not a RomoOptions JSON"), "{e}");
+        let e = format!(
+            "{:#}",
+            options_arg(&dir.path().join("missing.json")).unwrap_err()
+        );
+        assert!(e.contains("missing.json"), "{e}");
+    }
 }
