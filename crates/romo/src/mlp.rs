@@ -532,19 +532,20 @@ pub fn train_restarts(
     init_seed: u64,
     train_seed: u64,
 ) -> (Mlp, TrainReport) {
-    let mut best: Option<(f64, Mlp, TrainReport)> = None;
-    for j in 0..o.restarts.max(1) as u64 {
+    let start = |j: u64| {
         let mut m = Mlp::new(c_in, init_seed ^ (j << 40));
         let r = train(&mut m, x, labels, epochs, true, o, train_seed ^ (j << 40));
-        let l = r.loss.last().copied().unwrap_or(f64::INFINITY);
-        if best.as_ref().is_none_or(|b| l < b.0) {
-            best = Some((l, m, r));
+        (m, r)
+    };
+    let last = |r: &TrainReport| r.loss.last().copied().unwrap_or(f64::INFINITY);
+    let mut best = start(0);
+    for j in 1..o.restarts as u64 {
+        let c = start(j);
+        if last(&c.1) < last(&best.1) {
+            best = c;
         }
     }
-    match best {
-        Some((_, m, r)) => (m, r),
-        None => (Mlp::new(c_in, init_seed), TrainReport::default()),
-    }
+    best
 }
 
 #[cfg(test)]

@@ -914,7 +914,8 @@ fn train_rounds(
     tm: &mut Timer<'_>,
 ) -> Result<(Vec<Vec<f32>>, RoundLabels)> {
     let n = pr.feats.len();
-    let mut mlp = Mlp::new(pr.c, o.seed ^ 0x11);
+    // Trained from fresh starts in the first round, continued after.
+    let mut mlp: Option<Mlp> = None;
     let mut probs: Vec<Vec<f32>> = Vec::new();
     let mut last: Option<RoundLabels> = None;
     for round in 0..o.iterations {
@@ -954,7 +955,17 @@ fn train_rounds(
         progress("mlp", round, o.iterations);
         let rep = tm.time("mlp", || {
             let (x, y) = samples(pr, &labels, &keep, o, round);
-            if round == 0 {
+            if let Some(m) = mlp.as_mut() {
+                train(
+                    m,
+                    &x,
+                    &y,
+                    o.mlp.epochs_per_round,
+                    false,
+                    &o.mlp,
+                    o.seed ^ round as u64,
+                )
+            } else {
                 let (m, r) = train_restarts(
                     pr.c,
                     &x,
@@ -964,22 +975,14 @@ fn train_rounds(
                     o.seed ^ 0x11,
                     o.seed,
                 );
-                mlp = m;
+                mlp = Some(m);
                 r
-            } else {
-                train(
-                    &mut mlp,
-                    &x,
-                    &y,
-                    o.mlp.epochs_per_round,
-                    false,
-                    &o.mlp,
-                    o.seed ^ round as u64,
-                )
             }
         });
         report.rounds.push(rep);
-        probs = tm.time("mlp", || pr.feats.iter().map(|f| mlp.predict(f)).collect());
+        if let Some(m) = &mlp {
+            probs = tm.time("mlp", || pr.feats.iter().map(|f| m.predict(f)).collect());
+        }
         last = Some((labels, fits));
     }
     let last = last.ok_or_else(|| RomoError::Options("romo: iterations >= 1 required".into()))?;

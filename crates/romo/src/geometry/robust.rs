@@ -216,6 +216,11 @@ impl Soa {
         self.ax.len()
     }
 
+    /// Correspondence `i` as (point in the first image, in the second).
+    fn pair(&self, i: usize) -> (Pt, Pt) {
+        ([self.ax[i], self.ay[i]], [self.bx[i], self.by[i]])
+    }
+
     /// Squared residuals (px²) of `m` for points `lo..lo + out.len()`.
     fn residuals_into(&self, m: &TwoView, lo: usize, out: &mut [f64]) {
         let hi = lo + out.len();
@@ -310,17 +315,9 @@ fn residuals_may_beat(m: &TwoView, pts: &Soa, buf: &mut [f64], best: Option<f64>
 }
 
 /// LMedS for one model kind, then a least-squares refit on the inliers.
-/// `pts` holds the same correspondences as `a`, `b`.
-fn lmeds(
-    a: &[Pt],
-    b: &[Pt],
-    pts: &Soa,
-    homography: bool,
-    o: &RobustOptions,
-    seed: u64,
-) -> Option<Fit> {
+fn lmeds(pts: &Soa, homography: bool, o: &RobustOptions, seed: u64) -> Option<Fit> {
     let s = if homography { 4 } else { 7 };
-    let n = a.len();
+    let n = pts.len();
     if n < s + 1 {
         return None;
     }
@@ -337,8 +334,7 @@ fn lmeds(
                 k += 1;
             }
         }
-        let sa: Vec<Pt> = idx[..s].iter().map(|&i| a[i]).collect();
-        let sb: Vec<Pt> = idx[..s].iter().map(|&i| b[i]).collect();
+        let (sa, sb): (Vec<Pt>, Vec<Pt>) = idx[..s].iter().map(|&i| pts.pair(i)).unzip();
         let models: Vec<TwoView> = if homography {
             dlt(&sa, &sb).map(TwoView::Homography).into_iter().collect()
         } else {
@@ -368,7 +364,7 @@ fn lmeds(
         .iter()
         .enumerate()
         .filter(|(_, r)| **r < thr)
-        .map(|(i, _)| (a[i], b[i]))
+        .map(|(i, _)| pts.pair(i))
         .unzip();
     let refit = if homography {
         dlt(&ia, &ib).map(TwoView::Homography)
@@ -459,11 +455,11 @@ pub fn fit_two_view_all(a: &[Pt], b: &[Pt], o: &RobustOptions) -> crate::Result<
         )));
     }
     let pts = Soa::new(a, b);
-    let f = lmeds(a, b, &pts, false, o, o.seed)
+    let f = lmeds(&pts, false, o, o.seed)
         .ok_or_else(|| crate::RomoError::Geometry("fundamental matrix: degenerate".into()))?;
     let h = match o.selection {
         ModelSelection::Fundamental => None,
-        _ => lmeds(a, b, &pts, true, o, o.seed ^ 0x9e37_79b9),
+        _ => lmeds(&pts, true, o, o.seed ^ 0x9e37_79b9),
     };
     let (mut gf, mut gh) = (f64::NAN, f64::NAN);
     let use_h = match (&h, o.selection) {
