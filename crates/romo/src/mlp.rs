@@ -70,9 +70,11 @@ pub struct MlpOptions {
     /// same samples and the one whose last epoch has the lowest loss is
     /// kept (see [`train_restarts`]). With few U pixels the 8-unit net
     /// sometimes settles where it fits half of U: on `scenes/follow.toml`
-    /// 5 starts find the pedestrian in 4 of seeds 0–5 instead of 1. DAVIS
+    /// 5 starts find the pedestrian in 6 of seeds 0–7 instead of 3. DAVIS
     /// and the composite are unchanged (seeds 0–2) and the MLP takes 64
-    /// instead of 23 ms per 854×480 frame, hence 1.
+    /// instead of 23 ms per 854×480 frame, hence 1. Choosing the start
+    /// that fits its samples best instead finds it in 7 of 8 but loses on
+    /// DAVIS (goat over-predicts; `docs/results.md`).
     pub restarts: usize,
 }
 
