@@ -18,6 +18,7 @@
 //! weights are used row-normalised `Ŵ = W·min(1, softplus(c)/‖W_row‖₁)`
 //! (the ∞-norm bound), and the penalty is the product of the bounds.
 
+use crate::flow::simd::multiversion;
 use rand::{Rng, SeedableRng};
 use rayon::prelude::*;
 use serde::{Deserialize, Serialize};
@@ -252,20 +253,18 @@ impl Mlp {
     /// H for many samples (`x` is n × C row-major); values in (0, 1).
     pub fn predict(&self, x: &[f32]) -> Vec<f32> {
         let (w1, b1, w2, b2) = self.effective();
-        let c = self.c_in;
-        let w1t = transpose_hidden(&w1, c);
-        x.par_chunks(c.max(1))
-            .map(|xi| {
-                let z1 = hidden_pre(&w1t, b1, xi);
-                let mut z2 = b2;
-                for j in 0..HIDDEN {
-                    if z1[j] > 0.0 {
-                        z2 += w2[j] * z1[j];
-                    }
-                }
-                sigmoid(z2) as f32
-            })
-            .collect()
+        let c = self.c_in.max(1);
+        let net = Effective {
+            w1t: transpose_hidden(&w1, c),
+            b1,
+            w2: &w2,
+            b2,
+        };
+        let mut out = vec![0.0f32; x.len() / c];
+        out.par_chunks_mut(GRAD_CHUNK)
+            .zip(x.par_chunks(c * GRAD_CHUNK))
+            .for_each(|(o, xs)| predict_rows(&net, xs, o));
+        out
     }
 
     /// Balanced loss and its gradient w.r.t. the flat parameters over
@@ -285,55 +284,26 @@ impl Mlp {
             .filter(|l| **l == Label::Static)
             .count()
             .max(1) as f64;
-        let w1t = transpose_hidden(&w1, c);
-        // Gradient w.r.t. effective weights: [Ŵ1, b1, Ŵ2, b2].
-        let ne = HIDDEN * c + 2 * HIDDEN + 1;
+        let net = Effective {
+            w1t: transpose_hidden(&w1, c),
+            b1,
+            w2: &w2,
+            b2,
+        };
+        let weights = ClassWeights {
+            moving: nu,
+            static_: nl,
+            tau_sq: o.tau_sq,
+        };
         // Partial sums over fixed chunks of samples, added in order: the
         // result does not depend on how rayon splits the work, so training
         // is reproducible run to run for a given seed.
         let partials: Vec<(f64, Vec<f64>)> = x
             .par_chunks(c.max(1) * GRAD_CHUNK)
             .zip(labels.par_chunks(GRAD_CHUNK))
-            .map(|(xs, ls)| {
-                let (mut loss, mut g) = (0.0f64, vec![0.0f64; ne]);
-                for (xi, lab) in xs.chunks(c.max(1)).zip(ls) {
-                    let z1 = hidden_pre(&w1t, b1, xi);
-                    let mut z2 = b2;
-                    for j in 0..HIDDEN {
-                        if z1[j] > 0.0 {
-                            z2 += w2[j] * z1[j];
-                        }
-                    }
-                    let h = sigmoid(z2);
-                    let dh = match lab {
-                        Label::Moving => {
-                            let r = (1.0 - h).max(0.0);
-                            loss += gm(r, o.tau_sq) / nu;
-                            -gm_grad(r, o.tau_sq) / nu
-                        }
-                        Label::Static => {
-                            let r = h.max(0.0);
-                            loss += gm(r, o.tau_sq) / nl;
-                            gm_grad(r, o.tau_sq) / nl
-                        }
-                    };
-                    let dz2 = dh * h * (1.0 - h);
-                    let o2 = HIDDEN * c + HIDDEN;
-                    for j in 0..HIDDEN {
-                        if z1[j] > 0.0 {
-                            g[o2 + j] += dz2 * z1[j];
-                            let dz1 = dz2 * w2[j];
-                            for (k, v) in xi.iter().enumerate() {
-                                g[j * c + k] += dz1 * *v as f64;
-                            }
-                            g[HIDDEN * c + j] += dz1;
-                        }
-                    }
-                    g[o2 + HIDDEN] += dz2;
-                }
-                (loss, g)
-            })
+            .map(|(xs, ls)| chunk_loss_grad(&net, &weights, xs, ls))
             .collect();
+        let ne = HIDDEN * c + 2 * HIDDEN + 1;
         let (loss, ge) =
             partials
                 .into_iter()
@@ -366,6 +336,97 @@ impl Mlp {
         let loss = loss + lam * s1 * s2;
         g[n - 2] = (gs1 + lam * s2) * sigmoid(c1);
         g[n - 1] = (gs2 + lam * s1) * sigmoid(c2);
+        (loss, g)
+    }
+}
+
+/// A network's effective weights as the kernels read them: Ŵ1 stored
+/// input-major ([`transpose_hidden`]), b1, Ŵ2, b2.
+struct Effective<'a> {
+    w1t: Vec<f64>,
+    b1: &'a [f64],
+    w2: &'a [f64],
+    b2: f64,
+}
+
+/// Per-sample loss normalisers of [`Mlp::loss_grad`]: each class's kernel
+/// is divided by its sample count (U's divided by `moving_weight`).
+struct ClassWeights {
+    moving: f64,
+    static_: f64,
+    tau_sq: f64,
+}
+
+/// The hidden units after the ReLU. An inactive unit is 0, and adding
+/// w·0 = ±0 leaves a sum's bits as skipping the unit would (x + ±0 = x
+/// for x ≠ 0, and a sum that is 0 stays 0 whatever its sign, which
+/// neither the sigmoid nor the products below can tell apart).
+#[inline]
+fn relu(z1: &[f64; HIDDEN]) -> [f64; HIDDEN] {
+    let mut a = [0.0f64; HIDDEN];
+    for (a, z) in a.iter_mut().zip(z1) {
+        *a = if *z > 0.0 { *z } else { 0.0 };
+    }
+    a
+}
+
+multiversion! {
+    /// H for the samples `xs` (rows of `c`) into `out`.
+    fn predict_rows(net: &Effective, xs: &[f32], out: &mut [f32]) {
+        let c = net.w1t.len() / HIDDEN;
+        for (xi, o) in xs.chunks(c.max(1)).zip(out.iter_mut()) {
+            let a1 = relu(&hidden_pre(&net.w1t, net.b1, xi));
+            let mut z2 = net.b2;
+            for (w, a) in net.w2.iter().zip(&a1) {
+                z2 += w * a;
+            }
+            *o = sigmoid(z2) as f32;
+        }
+    }
+}
+
+multiversion! {
+    /// Loss and gradient w.r.t. the effective weights `[Ŵ1, b1, Ŵ2, b2]`
+    /// summed over one chunk of samples, in sample order.
+    fn chunk_loss_grad(net: &Effective, wt: &ClassWeights, xs: &[f32], ls: &[Label]) -> (f64, Vec<f64>) {
+        let c = net.w1t.len() / HIDDEN;
+        let ne = HIDDEN * c + 2 * HIDDEN + 1;
+        let (mut loss, mut g) = (0.0f64, vec![0.0f64; ne]);
+        let o2 = HIDDEN * c + HIDDEN;
+        let mut xf = vec![0.0f64; c];
+        for (xi, lab) in xs.chunks(c.max(1)).zip(ls) {
+            let a1 = relu(&hidden_pre(&net.w1t, net.b1, xi));
+            let mut z2 = net.b2;
+            for (w, a) in net.w2.iter().zip(&a1) {
+                z2 += w * a;
+            }
+            let h = sigmoid(z2);
+            let dh = match lab {
+                Label::Moving => {
+                    let r = (1.0 - h).max(0.0);
+                    loss += gm(r, wt.tau_sq) / wt.moving;
+                    -gm_grad(r, wt.tau_sq) / wt.moving
+                }
+                Label::Static => {
+                    let r = h.max(0.0);
+                    loss += gm(r, wt.tau_sq) / wt.static_;
+                    gm_grad(r, wt.tau_sq) / wt.static_
+                }
+            };
+            let dz2 = dh * h * (1.0 - h);
+            for (f, v) in xf.iter_mut().zip(xi) {
+                *f = *v as f64;
+            }
+            for (j, (a, w)) in a1.iter().zip(net.w2).enumerate() {
+                g[o2 + j] += dz2 * a;
+                let dz1 = if *a > 0.0 { dz2 * w } else { 0.0 };
+                for (gk, v) in g[j * c..(j + 1) * c].iter_mut().zip(&xf) {
+                    *gk += dz1 * v;
+                }
+                g[HIDDEN * c + j] += dz1;
+            }
+            g[o2 + HIDDEN] += dz2;
+        }
         (loss, g)
     }
 }

@@ -1,5 +1,6 @@
 //! Run-time instruction-set dispatch for the flow kernels (and the LMedS
-//! residuals and the Gaussian blur, which use it too). The release build
+//! residuals, the Gaussian blur and the MLP's training and prediction,
+//! which use it too). The release build
 //! targets baseline x86-64 (SSE2, 4 lanes), so the 8-wide loops of the
 //! patch search, the densification, the variational refinement and the
 //! SOR solver would run at half width. Each hot function is declared
@@ -8,8 +9,8 @@
 //! to rayon, inherit that) and picks the copy at run time. Only the vector
 //! width changes: Rust never contracts `a * b + c` into a fused
 //! multiply–add or reorders floating-point arithmetic, so both copies
-//! compute bit-identical results (tested in `dis`, `geometry::robust`
-//! and `plane`).
+//! compute bit-identical results (tested in `dis`, `geometry::robust`,
+//! `plane` and `mlp`).
 
 use std::sync::atomic::{AtomicBool, Ordering};
 
