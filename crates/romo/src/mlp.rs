@@ -270,20 +270,25 @@ impl Mlp {
     /// Balanced loss and its gradient w.r.t. the flat parameters over
     /// samples `x` (n × C) with labels.
     pub fn loss_grad(&self, x: &[f32], labels: &[Label], o: &MlpOptions) -> (f64, Vec<f64>) {
+        let rows: Vec<usize> = (0..labels.len()).collect();
+        self.loss_grad_rows(x, labels, &rows, o)
+    }
+
+    /// [`Mlp::loss_grad`] over the samples `rows` of `x` and `labels` (a
+    /// mini-batch read in place, in the order of `rows`).
+    fn loss_grad_rows(
+        &self,
+        x: &[f32],
+        labels: &[Label],
+        rows: &[usize],
+        o: &MlpOptions,
+    ) -> (f64, Vec<f64>) {
         let c = self.c_in;
         let n = self.p.len();
         let (w1, b1, w2, b2) = self.effective();
-        let nu = labels
-            .iter()
-            .filter(|l| **l == Label::Moving)
-            .count()
-            .max(1) as f64
-            / o.moving_weight;
-        let nl = labels
-            .iter()
-            .filter(|l| **l == Label::Static)
-            .count()
-            .max(1) as f64;
+        let count = |class: Label| rows.iter().filter(|i| labels[**i] == class).count();
+        let nu = count(Label::Moving).max(1) as f64 / o.moving_weight;
+        let nl = count(Label::Static).max(1) as f64;
         let net = Effective {
             w1t: transpose_hidden(&w1, c),
             b1,
@@ -298,10 +303,9 @@ impl Mlp {
         // Partial sums over fixed chunks of samples, added in order: the
         // result does not depend on how rayon splits the work, so training
         // is reproducible run to run for a given seed.
-        let partials: Vec<(f64, Vec<f64>)> = x
-            .par_chunks(c.max(1) * GRAD_CHUNK)
-            .zip(labels.par_chunks(GRAD_CHUNK))
-            .map(|(xs, ls)| chunk_loss_grad(&net, &weights, xs, ls))
+        let partials: Vec<(f64, Vec<f64>)> = rows
+            .par_chunks(GRAD_CHUNK)
+            .map(|r| chunk_loss_grad(&net, &weights, x, labels, r))
             .collect();
         let ne = HIDDEN * c + 2 * HIDDEN + 1;
         let (loss, ge) =
@@ -388,20 +392,21 @@ multiversion! {
 multiversion! {
     /// Loss and gradient w.r.t. the effective weights `[Ŵ1, b1, Ŵ2, b2]`
     /// summed over one chunk of samples, in sample order.
-    fn chunk_loss_grad(net: &Effective, wt: &ClassWeights, xs: &[f32], ls: &[Label]) -> (f64, Vec<f64>) {
+    fn chunk_loss_grad(net: &Effective, wt: &ClassWeights, x: &[f32], labels: &[Label], rows: &[usize]) -> (f64, Vec<f64>) {
         let c = net.w1t.len() / HIDDEN;
         let ne = HIDDEN * c + 2 * HIDDEN + 1;
         let (mut loss, mut g) = (0.0f64, vec![0.0f64; ne]);
         let o2 = HIDDEN * c + HIDDEN;
         let mut xf = vec![0.0f64; c];
-        for (xi, lab) in xs.chunks(c.max(1)).zip(ls) {
+        for &i in rows {
+            let xi = &x[i * c..(i + 1) * c];
             let a1 = relu(&hidden_pre(&net.w1t, net.b1, xi));
             let mut z2 = net.b2;
             for (w, a) in net.w2.iter().zip(&a1) {
                 z2 += w * a;
             }
             let h = sigmoid(z2);
-            let dh = match lab {
+            let dh = match labels[i] {
                 Label::Moving => {
                     let r = (1.0 - h).max(0.0);
                     loss += gm(r, wt.tau_sq) / wt.moving;
@@ -522,7 +527,6 @@ pub fn train(
     o: &MlpOptions,
     seed: u64,
 ) -> TrainReport {
-    let c = mlp.c_in;
     let n = labels.len();
     let mut rep = TrainReport {
         samples_moving: labels.iter().filter(|l| **l == Label::Moving).count(),
@@ -535,10 +539,6 @@ pub fn train(
     let mut rng = rand_pcg::Pcg64::seed_from_u64(seed);
     let mut adam = Adam::new(mlp.n_params(), o.lr);
     let mut order: Vec<usize> = (0..n).collect();
-    let (mut bx, mut bl) = (
-        Vec::with_capacity(o.batch_size * c),
-        Vec::with_capacity(o.batch_size),
-    );
     let anneal_epochs = (0.6 * epochs as f64).max(1.0);
     for e in 0..epochs {
         let mut oe = o.clone();
@@ -551,14 +551,8 @@ pub fn train(
         }
         let mut el = 0.0;
         let mut nb = 0;
-        for chunk in order.chunks(o.batch_size) {
-            bx.clear();
-            bl.clear();
-            for &i in chunk {
-                bx.extend_from_slice(&x[i * c..(i + 1) * c]);
-                bl.push(labels[i]);
-            }
-            let (l, g) = mlp.loss_grad(&bx, &bl, &oe);
+        for batch in order.chunks(o.batch_size) {
+            let (l, g) = mlp.loss_grad_rows(x, labels, batch, &oe);
             adam.step(&mut mlp.p, &g);
             el += l;
             nb += 1;
