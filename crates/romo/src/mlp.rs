@@ -255,7 +255,7 @@ impl Mlp {
         let (w1, b1, w2, b2) = self.effective();
         let c = self.c_in.max(1);
         let net = Effective {
-            w1t: transpose_hidden(&w1, c),
+            w1t: transpose_hidden(&w1, self.c_in),
             b1,
             w2: &w2,
             b2,
