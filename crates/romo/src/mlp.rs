@@ -26,8 +26,9 @@ use serde::{Deserialize, Serialize};
 /// Hidden units (the paper's 8).
 pub const HIDDEN: usize = 8;
 
-/// Samples per partial gradient sum in [`Mlp::loss_grad`] (fixed, so the
-/// summation order never depends on the thread count or scheduling).
+/// Samples per task of the MLP kernels: per partial gradient sum in
+/// [`Mlp::loss_grad`] (fixed, so the summation order never depends on the
+/// thread count or scheduling) and per parallel block in [`Mlp::predict`].
 const GRAD_CHUNK: usize = 1024;
 
 /// Training options. Paper defaults: Adam, lr 0.02, 25 epochs per round,

@@ -955,20 +955,22 @@ fn train_rounds(
             vec![true; n]
         };
         progress("mlp", round, o.iterations);
-        let rep = tm.time("mlp", || {
+        let (m, rep) = tm.time("mlp", || {
             let (x, y) = samples(pr, &labels, &keep, o, round);
-            if let Some(m) = mlp.as_mut() {
-                train(
-                    m,
-                    &x,
-                    &y,
-                    o.mlp.epochs_per_round,
-                    false,
-                    &o.mlp,
-                    o.seed ^ round as u64,
-                )
-            } else {
-                let (m, r) = train_restarts(
+            match mlp.take() {
+                Some(mut m) => {
+                    let r = train(
+                        &mut m,
+                        &x,
+                        &y,
+                        o.mlp.epochs_per_round,
+                        false,
+                        &o.mlp,
+                        o.seed ^ round as u64,
+                    );
+                    (m, r)
+                }
+                None => train_restarts(
                     pr.c,
                     &x,
                     &y,
@@ -976,15 +978,12 @@ fn train_rounds(
                     &o.mlp,
                     o.seed ^ 0x11,
                     o.seed,
-                );
-                mlp = Some(m);
-                r
+                ),
             }
         });
         report.rounds.push(rep);
-        if let Some(m) = &mlp {
-            probs = tm.time("mlp", || pr.feats.iter().map(|f| m.predict(f)).collect());
-        }
+        let m = mlp.insert(m);
+        probs = tm.time("mlp", || pr.feats.iter().map(|f| m.predict(f)).collect());
         last = Some((labels, fits));
     }
     let last = last.ok_or_else(|| RomoError::Options("romo: iterations >= 1 required".into()))?;
