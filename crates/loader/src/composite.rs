@@ -56,6 +56,12 @@ pub struct CompositeOptions {
     pub resolution: String,
     /// Seed for sequence order, sizes, paths and DAVIS start frames. Default 0.
     pub seed: u64,
+    /// The camera follows each object: its box stays at one place in the
+    /// image for the whole run (only its own articulation moves) while the
+    /// background moves with the capture's camera, as when a video tracks a
+    /// runner or a car. Default false (objects cross the frame).
+    #[serde(default)]
+    pub follow: bool,
 }
 
 impl Default for CompositeOptions {
@@ -70,6 +76,7 @@ impl Default for CompositeOptions {
             sequences: Vec::new(),
             resolution: "480p".into(),
             seed: 0,
+            follow: false,
         }
     }
 }
@@ -447,8 +454,16 @@ fn plan_runs(
             seq,
             start,
             height_frac: if b > a { rng.random_range(a..=b) } else { a },
-            x_from: if flip { q } else { p },
-            x_to: if flip { p } else { q },
+            x_from: match (opts.follow, flip) {
+                (true, _) => (p + q) / 2.0,
+                (false, true) => q,
+                (false, false) => p,
+            },
+            x_to: match (opts.follow, flip) {
+                (true, _) => (p + q) / 2.0,
+                (false, true) => p,
+                (false, false) => q,
+            },
             y_bottom: rng.random_range(0.75..0.98),
         });
     }

@@ -173,6 +173,32 @@ fn composite_scene_is_consistent() {
 }
 
 #[test]
+fn a_followed_object_keeps_its_place_in_the_image() {
+    let dir = tempfile::tempdir().unwrap();
+    let (bg, dv) = (dir.path().join("bg"), dir.path().join("davis"));
+    background(&bg, 9, 32, 24);
+    // The DAVIS object moves 1 px per frame in its own video.
+    davis(&dv, "swan", 30, 16, 16, (16, 16));
+    let gt = |out: &Path, name: &str| std::fs::read(out.join("gt_motion").join(name)).unwrap();
+    for follow in [false, true] {
+        let out = dir.path().join(format!("out_{follow}"));
+        let opts = CompositeOptions {
+            downscale: 1,
+            run_length: 4,
+            follow,
+            ..Default::default()
+        };
+        composite(&bg, &dv, &out, &opts).unwrap();
+        // Frames 0002–0005 are the first run (0001 is a test view).
+        let first = gt(&out, "0002.png");
+        let same = ["0003.png", "0004.png", "0005.png"]
+            .iter()
+            .all(|n| gt(&out, n) == first);
+        assert_eq!(same, follow, "follow {follow}");
+    }
+}
+
+#[test]
 fn downscale_scales_images_and_intrinsics() {
     let dir = tempfile::tempdir().unwrap();
     let (bg, dv, out) = (

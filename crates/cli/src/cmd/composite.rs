@@ -35,6 +35,11 @@ pub struct Args {
     /// Seed for sequence order, object sizes and paths.
     #[arg(long, default_value_t = 0)]
     pub seed: u64,
+    /// The camera follows each object: its box stays at one place in the
+    /// image for its run while the background moves (a video that tracks a
+    /// runner or a car).
+    #[arg(long)]
+    pub follow: bool,
 }
 
 pub fn run(args: &Args, ctx: &Ctx) -> anyhow::Result<serde_json::Value> {
@@ -44,6 +49,7 @@ pub fn run(args: &Args, ctx: &Ctx) -> anyhow::Result<serde_json::Value> {
         run_length: args.run_length,
         sequences: args.sequences.clone(),
         seed: args.seed,
+        follow: args.follow,
         ..Default::default()
     };
     let t0 = std::time::Instant::now();
