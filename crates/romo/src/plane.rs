@@ -88,9 +88,12 @@ impl Plane {
         }
         let cols = resize_taps(nw, src.w);
         let rows = resize_taps(nh, src.h);
-        Plane::from_fn(nw, nh, |x, y| {
-            Taps::new(cols[x], rows[y], src.w).sample(&src.data)
-        })
+        let across = resample_rows(&src.data, src.w, &cols, &rows);
+        let mut data = vec![0.0; nw * nh];
+        data.par_chunks_mut(nw.max(1))
+            .zip(&rows)
+            .for_each(|(out, &tap)| lerp_rows(&across, nw, tap, out));
+        Plane { w: nw, h: nh, data }
     }
 
     /// Half resolution by 2×2 box averaging (odd edges clamped).
@@ -162,29 +165,26 @@ impl Plane {
                 *o = ((pre[b] - pre[a]) / (b - a) as f64) as f32;
             }
         });
-        // Vertical running sums over columns.
-        let mut out = vec![0.0f32; w * h];
-        let cols: Vec<Vec<f32>> = (0..w)
-            .into_par_iter()
-            .map(|x| {
-                let mut pre = vec![0.0f64; h + 1];
-                for y in 0..h {
-                    pre[y + 1] = pre[y] + tmp[y * w + x] as f64;
-                }
-                (0..h)
-                    .map(|y| {
-                        let a = y.saturating_sub(r);
-                        let b = (y + r + 1).min(h);
-                        ((pre[b] - pre[a]) / (b - a) as f64) as f32
-                    })
-                    .collect()
-            })
-            .collect();
-        for (x, col) in cols.iter().enumerate() {
-            for (y, v) in col.iter().enumerate() {
-                out[y * w + x] = *v;
+        // Vertical running sums, a whole row of columns at a time (each
+        // column's sums in the same order as one column alone).
+        let mut pre = vec![0.0f64; (h + 1) * w];
+        for y in 0..h {
+            let (done, next) = pre.split_at_mut((y + 1) * w);
+            let prev = &done[y * w..];
+            for ((p, q), t) in next[..w].iter_mut().zip(prev).zip(&tmp[y * w..(y + 1) * w]) {
+                *p = q + *t as f64;
             }
         }
+        let mut out = vec![0.0f32; w * h];
+        out.par_chunks_mut(w.max(1)).enumerate().for_each(|(y, o)| {
+            let a = y.saturating_sub(r);
+            let b = (y + r + 1).min(h);
+            let n = (b - a) as f64;
+            let (pa, pb) = (&pre[a * w..(a + 1) * w], &pre[b * w..(b + 1) * w]);
+            for ((o, hi), lo) in o.iter_mut().zip(pb).zip(pa) {
+                *o = ((hi - lo) / n) as f32;
+            }
+        });
         Plane { w, h, data: out }
     }
 
@@ -261,6 +261,50 @@ pub fn resize_taps(n: usize, src: usize) -> Vec<(usize, usize, f32)> {
     (0..n)
         .map(|i| axis_tap((i as f32 + 0.5) * s - 0.5, src))
         .collect()
+}
+
+/// Horizontal half of a separable bilinear resample of the row-major `d`
+/// (`w` wide): every source row that `rows` uses, resampled to
+/// `cols.len()` columns by `a + fx·(b − a)` as [`Taps::sample`] does within
+/// a row; rows no output needs stay zero. With [`lerp_rows`] this gives the
+/// bits of sampling every output pixel with [`Taps`], with each source row
+/// resampled once instead of once per output row that reads it.
+pub fn resample_rows(
+    d: &[f32],
+    w: usize,
+    cols: &[(usize, usize, f32)],
+    rows: &[(usize, usize, f32)],
+) -> Vec<f32> {
+    let h = d.len() / w.max(1);
+    let nw = cols.len();
+    let mut used = vec![false; h];
+    for &(y0, y1, _) in rows {
+        used[y0] = true;
+        used[y1] = true;
+    }
+    let mut out = vec![0.0f32; h * nw];
+    out.par_chunks_mut(nw.max(1))
+        .zip(d.par_chunks(w.max(1)))
+        .zip(&used)
+        .filter(|(_, used)| **used)
+        .for_each(|((o, row), _)| {
+            for (v, &(x0, x1, fx)) in o.iter_mut().zip(cols) {
+                *v = row[x0] + fx * (row[x1] - row[x0]);
+            }
+        });
+    out
+}
+
+/// Vertical half of the separable resample: one output row,
+/// `a + fy·(b − a)` of the rows `y0` and `y1` of [`resample_rows`]'s
+/// result (`nw` wide).
+#[inline]
+pub fn lerp_rows(across: &[f32], nw: usize, (y0, y1, fy): (usize, usize, f32), out: &mut [f32]) {
+    let a = &across[y0 * nw..(y0 + 1) * nw];
+    let b = &across[y1 * nw..(y1 + 1) * nw];
+    for ((o, a), b) in out.iter_mut().zip(a).zip(b) {
+        *o = a + fy * (b - a);
+    }
 }
 
 /// The four taps and weights of one bilinear sample in a plane `w` wide:

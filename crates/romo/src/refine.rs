@@ -8,6 +8,7 @@
 //! Sun's fast guided filter) so refinement costs little at 854×480.
 
 use crate::plane::{Plane, Rgb};
+use rayon::prelude::*;
 use serde::{Deserialize, Serialize};
 
 /// Refinement options.
@@ -241,15 +242,33 @@ pub fn fast_guided_filter_rgb(i: &Rgb, p: &Plane, r: usize, eps: f32, s: usize) 
     let (a, b) = guided_coefficients_rgb(&i.resize(w, h), &p.resize(w, h), (r / s).max(1), eps);
     // The coefficients upsampled as `Plane::resize` does (pixel-centre
     // aligned bilinear) and applied in one pass.
+    // Separably: each coarse row once across, then per output row down.
     let (fw, fh) = (i.w(), i.h());
     let cols = crate::plane::resize_taps(fw, w);
     let rows = crate::plane::resize_taps(fh, h);
-    Plane::from_fn(fw, fh, |x, y| {
-        let j = y * fw + x;
-        let t = crate::plane::Taps::new(cols[x], rows[y], w);
-        let [a0, a1, a2, bb] = [&a[0], &a[1], &a[2], &b].map(|q| t.sample(&q.data));
-        a0 * i.c[0].data[j] + a1 * i.c[1].data[j] + a2 * i.c[2].data[j] + bb
-    })
+    let across =
+        [&a[0], &a[1], &a[2], &b].map(|q| crate::plane::resample_rows(&q.data, w, &cols, &rows));
+    let mut data = vec![0.0; fw * fh];
+    data.par_chunks_mut(fw.max(1))
+        .zip(&rows)
+        .enumerate()
+        .for_each_init(
+            || vec![0.0f32; 4 * fw],
+            |co, (y, (out, &tap))| {
+                for (k, c) in co.chunks_mut(fw.max(1)).enumerate() {
+                    crate::plane::lerp_rows(&across[k], fw, tap, c);
+                }
+                let (a0, rest) = co.split_at(fw);
+                let (a1, rest) = rest.split_at(fw);
+                let (a2, bb) = rest.split_at(fw);
+                let px = |k: usize| &i.c[k].data[y * fw..(y + 1) * fw];
+                let (i0, i1, i2) = (px(0), px(1), px(2));
+                for x in 0..fw {
+                    out[x] = a0[x] * i0[x] + a1[x] * i1[x] + a2[x] * i2[x] + bb[x];
+                }
+            },
+        );
+    Plane { w: fw, h: fh, data }
 }
 
 /// Temporal smoothing of a sequence of probability maps (same size).
@@ -406,6 +425,35 @@ mod tests {
         // A constant input stays constant.
         let c = guided_filter_rgb(&g, &Plane::filled(40, 20, 0.3), 4, 1e-3);
         assert!(c.data.iter().all(|v| (v - 0.3).abs() < 1e-4));
+    }
+
+    /// The separable application of the coarse colour coefficients gives
+    /// the bits of sampling them per pixel with bilinear taps.
+    #[test]
+    fn colour_coefficients_applied_separably_equal_per_pixel_taps() {
+        use crate::plane::{Taps, resize_taps};
+        let (fw, fh, r, eps, s) = (37, 29, 8, 1e-3, 4);
+        let img = Rgb {
+            c: std::array::from_fn(|k| {
+                Plane::from_fn(fw, fh, |x, y| ((x * (3 + k) + y * 7) % 13) as f32 / 13.0)
+            }),
+        };
+        let p = Plane::from_fn(fw, fh, |x, y| if (x + 2 * y) % 9 < 4 { 0.9 } else { 0.1 });
+        let got = fast_guided_filter_rgb(&img, &p, r, eps, s);
+        let (w, h) = (fw.div_ceil(s), fh.div_ceil(s));
+        let (a, b) = guided_coefficients_rgb(&img.resize(w, h), &p.resize(w, h), r / s, eps);
+        let (cols, rows) = (resize_taps(fw, w), resize_taps(fh, h));
+        for y in 0..fh {
+            for x in 0..fw {
+                let t = Taps::new(cols[x], rows[y], w);
+                let j = y * fw + x;
+                let want = t.sample(&a[0].data) * img.c[0].data[j]
+                    + t.sample(&a[1].data) * img.c[1].data[j]
+                    + t.sample(&a[2].data) * img.c[2].data[j]
+                    + t.sample(&b.data);
+                assert_eq!(got.data[j].to_bits(), want.to_bits(), "({x}, {y})");
+            }
+        }
     }
 
     #[test]
