@@ -443,9 +443,9 @@ mod tests {
         let (w, h) = (fw.div_ceil(s), fh.div_ceil(s));
         let (a, b) = guided_coefficients_rgb(&img.resize(w, h), &p.resize(w, h), r / s, eps);
         let (cols, rows) = (resize_taps(fw, w), resize_taps(fh, h));
-        for y in 0..fh {
-            for x in 0..fw {
-                let t = Taps::new(cols[x], rows[y], w);
+        for (y, &row) in rows.iter().enumerate() {
+            for (x, &col) in cols.iter().enumerate() {
+                let t = Taps::new(col, row, w);
                 let j = y * fw + x;
                 let want = t.sample(&a[0].data) * img.c[0].data[j]
                     + t.sample(&a[1].data) * img.c[1].data[j]
