@@ -241,8 +241,8 @@ pub fn fast_guided_filter_rgb(i: &Rgb, p: &Plane, r: usize, eps: f32, s: usize) 
     let (w, h) = (i.w().div_ceil(s).max(1), i.h().div_ceil(s).max(1));
     let (a, b) = guided_coefficients_rgb(&i.resize(w, h), &p.resize(w, h), (r / s).max(1), eps);
     // The coefficients upsampled as `Plane::resize` does (pixel-centre
-    // aligned bilinear) and applied in one pass.
-    // Separably: each coarse row once across, then per output row down.
+    // aligned bilinear, separably: each coarse row once across, then each
+    // output row down) and applied to the full-resolution guide row by row.
     let (fw, fh) = (i.w(), i.h());
     let cols = crate::plane::resize_taps(fw, w);
     let rows = crate::plane::resize_taps(fh, h);
