@@ -450,20 +450,18 @@ fn plan_runs(
         let [a, b] = opts.object_height;
         let (p, q) = (rng.random_range(0.1..0.35), rng.random_range(0.65..0.9));
         let flip = rng.random_bool(0.5);
+        // A followed object stays at the middle of the path it would cross.
+        let (x_from, x_to) = match (opts.follow, flip) {
+            (true, _) => ((p + q) / 2.0, (p + q) / 2.0),
+            (false, true) => (q, p),
+            (false, false) => (p, q),
+        };
         runs.push(Run {
             seq,
             start,
             height_frac: if b > a { rng.random_range(a..=b) } else { a },
-            x_from: match (opts.follow, flip) {
-                (true, _) => (p + q) / 2.0,
-                (false, true) => q,
-                (false, false) => p,
-            },
-            x_to: match (opts.follow, flip) {
-                (true, _) => (p + q) / 2.0,
-                (false, true) => p,
-                (false, false) => q,
-            },
+            x_from,
+            x_to,
             y_bottom: rng.random_range(0.75..0.98),
         });
     }

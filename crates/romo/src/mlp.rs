@@ -375,17 +375,25 @@ fn relu(z1: &[f64; HIDDEN]) -> [f64; HIDDEN] {
     a
 }
 
+/// One sample through the network: the hidden units after the ReLU and
+/// the output's pre-activation `b2 + Ŵ2·a1` (both kernels share it, so
+/// training and prediction see the same bits).
+#[inline]
+fn forward(net: &Effective, xi: &[f32]) -> ([f64; HIDDEN], f64) {
+    let a1 = relu(&hidden_pre(&net.w1t, net.b1, xi));
+    let mut z2 = net.b2;
+    for (w, a) in net.w2.iter().zip(&a1) {
+        z2 += w * a;
+    }
+    (a1, z2)
+}
+
 multiversion! {
     /// H for the samples `xs` (rows of `c`) into `out`.
     fn predict_rows(net: &Effective, xs: &[f32], out: &mut [f32]) {
         let c = net.w1t.len() / HIDDEN;
         for (xi, o) in xs.chunks(c.max(1)).zip(out.iter_mut()) {
-            let a1 = relu(&hidden_pre(&net.w1t, net.b1, xi));
-            let mut z2 = net.b2;
-            for (w, a) in net.w2.iter().zip(&a1) {
-                z2 += w * a;
-            }
-            *o = sigmoid(z2) as f32;
+            *o = sigmoid(forward(net, xi).1) as f32;
         }
     }
 }
@@ -401,11 +409,7 @@ multiversion! {
         let mut xf = vec![0.0f64; c];
         for &i in rows {
             let xi = &x[i * c..(i + 1) * c];
-            let a1 = relu(&hidden_pre(&net.w1t, net.b1, xi));
-            let mut z2 = net.b2;
-            for (w, a) in net.w2.iter().zip(&a1) {
-                z2 += w * a;
-            }
+            let (a1, z2) = forward(net, xi);
             let h = sigmoid(z2);
             let dh = match labels[i] {
                 Label::Moving => {
