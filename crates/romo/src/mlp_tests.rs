@@ -171,8 +171,10 @@ fn hidden_pre_equals_row_sums() {
 fn restarts_keep_the_start_with_the_lowest_final_loss() {
     let c = 4;
     let (x, l) = toy(1500, c, 5);
+    // Every start fits, so the choice is by loss alone.
     let mut o = MlpOptions {
         batch_size: 256,
+        min_fit_recall: 0.0,
         ..Default::default()
     };
     let (one, r1) = train_restarts(c, &x, &l, 6, &o, 3, 9);
@@ -203,6 +205,67 @@ fn restarts_keep_the_start_with_the_lowest_final_loss() {
         m.predict(&x)
     });
     o.restarts = 0;
+    assert!(o.validate().is_err());
+}
+
+/// A first start that fits too little of U is replaced: the extra starts
+/// are trained, and the kept one is the lowest-loss start among those that
+/// fit, or among all when none fits. A first start that fits is kept
+/// without training any other.
+#[test]
+fn a_first_start_that_does_not_fit_u_is_replaced() {
+    let c = 4;
+    let (x, l) = toy(1500, c, 5);
+    let mut o = MlpOptions {
+        batch_size: 256,
+        refit_starts: 3,
+        ..Default::default()
+    };
+    // Two epochs leave the starts at different recalls of U.
+    let reports: Vec<TrainReport> = (0..4u64)
+        .map(|j| {
+            train(
+                &mut Mlp::new(c, 3 ^ (j << 40)),
+                &x,
+                &l,
+                2,
+                true,
+                &o,
+                9 ^ (j << 40),
+            )
+        })
+        .collect();
+    let recall: Vec<f64> = reports.iter().map(|r| r.recall_moving).collect();
+    let last = |j: usize| *reports[j].loss.last().unwrap();
+    let top = recall[1..].iter().copied().fold(0.0, f64::max);
+    assert!(top > recall[0], "no later start fits more of U: {recall:?}");
+
+    // Start 0 fits: it is kept as plain training would leave it.
+    o.min_fit_recall = recall[0];
+    let (kept, r) = train_restarts(c, &x, &l, 2, &o, 3, 9);
+    assert_eq!(r.loss, reports[0].loss);
+    let mut plain = Mlp::new(c, 3);
+    train(&mut plain, &x, &l, 2, true, &o, 9);
+    assert_eq!(kept.p, plain.p);
+
+    // Start 0 does not fit: the lowest loss among the starts that do.
+    o.min_fit_recall = (recall[0] + top) / 2.0;
+    let fitting: Vec<usize> = (1..4).filter(|j| recall[*j] >= o.min_fit_recall).collect();
+    let want = fitting
+        .iter()
+        .copied()
+        .min_by(|a, b| last(*a).total_cmp(&last(*b)))
+        .unwrap();
+    let (_, r) = train_restarts(c, &x, &l, 2, &o, 3, 9);
+    assert_eq!(r.loss, reports[want].loss, "recalls {recall:?}");
+
+    // None fits: the lowest loss among all four.
+    o.min_fit_recall = 1.0;
+    assert!(recall.iter().all(|r| *r < 1.0), "{recall:?}");
+    let want = (0..4).min_by(|a, b| last(*a).total_cmp(&last(*b))).unwrap();
+    let (_, r) = train_restarts(c, &x, &l, 2, &o, 3, 9);
+    assert_eq!(r.loss, reports[want].loss);
+    o.min_fit_recall = 1.5;
     assert!(o.validate().is_err());
 }
 
