@@ -509,6 +509,10 @@ pub struct TrainReport {
     /// True when the net calls (almost) everything one class: one of the
     /// recalls is below 5% while the other is above 95%.
     pub collapsed: bool,
+    /// Fresh starts [`train_restarts`] trained to choose this network (0
+    /// from [`train`], which continues or trains one network).
+    #[serde(default)]
+    pub starts: usize,
 }
 
 /// The first layer's weights (`HIDDEN` rows of `c`) stored input-major,
@@ -635,21 +639,22 @@ pub fn train_restarts(
         }
     };
     let mut best = start(0);
-    let first = o.restarts as u64;
-    for j in 1..first {
-        let c = start(j);
-        if better(&c.1, &best.1) {
-            best = c;
-        }
-    }
-    if !fits(&best.1) {
-        for j in first..first + o.refit_starts as u64 {
-            let c = start(j);
+    let keep_better = |range: std::ops::Range<usize>, best: &mut (Mlp, TrainReport)| {
+        for j in range {
+            let c = start(j as u64);
             if better(&c.1, &best.1) {
-                best = c;
+                *best = c;
             }
         }
-    }
+    };
+    keep_better(1..o.restarts, &mut best);
+    let tried = if fits(&best.1) {
+        o.restarts
+    } else {
+        keep_better(o.restarts..o.restarts + o.refit_starts, &mut best);
+        o.restarts + o.refit_starts
+    };
+    best.1.starts = tried;
     best
 }
 

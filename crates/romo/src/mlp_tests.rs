@@ -243,7 +243,7 @@ fn a_first_start_that_does_not_fit_u_is_replaced() {
     // Start 0 fits: it is kept as plain training would leave it.
     o.min_fit_recall = recall[0];
     let (kept, r) = train_restarts(c, &x, &l, 2, &o, 3, 9);
-    assert_eq!(r.loss, reports[0].loss);
+    assert_eq!((&r.loss, r.starts), (&reports[0].loss, 1));
     let mut plain = Mlp::new(c, 3);
     train(&mut plain, &x, &l, 2, true, &o, 9);
     assert_eq!(kept.p, plain.p);
@@ -258,6 +258,7 @@ fn a_first_start_that_does_not_fit_u_is_replaced() {
         .unwrap();
     let (_, r) = train_restarts(c, &x, &l, 2, &o, 3, 9);
     assert_eq!(r.loss, reports[want].loss, "recalls {recall:?}");
+    assert_eq!(r.starts, 4);
 
     // None fits: the lowest loss among all four.
     o.min_fit_recall = 1.0;
