@@ -651,8 +651,9 @@ pub fn train_restarts(
     let tried = if fits(&best.1) {
         o.restarts
     } else {
-        keep_better(o.restarts..o.restarts + o.refit_starts, &mut best);
-        o.restarts + o.refit_starts
+        let most = o.restarts.saturating_add(o.refit_starts);
+        keep_better(o.restarts..most, &mut best);
+        most
     };
     best.1.starts = tried;
     best
