@@ -3,7 +3,8 @@
 //! masks into `$OUT` (default `romo_davis` in the temporary folder), J /
 //! precision / recall per sequence as JSON. Options may be overridden with
 //! a partial JSON `RomoOptions` in `$ROMO_OPTS`; `$SEQS` restricts to a
-//! comma-separated list.
+//! comma-separated list. `$FRAME_STEP` N (default 1) keeps every N-th frame
+//! (0, N, 2N, …), N times the motion per pair; J is scored on those frames.
 use std::path::PathBuf;
 
 mod common;
@@ -29,6 +30,14 @@ fn run() -> Res<()> {
         .map_or_else(|| std::env::temp_dir().join("romo_davis"), PathBuf::from);
     let opts = common::romo_options()?;
     let only = common::sequences();
+    let step = match std::env::var("FRAME_STEP") {
+        Ok(v) => v
+            .parse::<usize>()
+            .ok()
+            .filter(|n| *n > 0)
+            .ok_or_else(|| format!("FRAME_STEP: expected a positive integer, got {v:?}"))?,
+        Err(_) => 1,
+    };
     let mut rows = vec![];
     let mut js = vec![];
     let imgs = davis.join("JPEGImages/480p");
@@ -37,7 +46,7 @@ fn run() -> Res<()> {
         if only.as_ref().is_some_and(|o| !o.contains(&s)) {
             continue;
         }
-        let paths = sorted_entries(&dir)?;
+        let paths: Vec<PathBuf> = sorted_entries(&dir)?.into_iter().step_by(step).collect();
         let names: Vec<String> = paths.iter().map(|p| common::file_name(p)).collect();
         let t = std::time::Instant::now();
         let rep = romo::segment_paths(&paths, &names, &out.join(&s), &opts, &|_, _, _| {})?;
