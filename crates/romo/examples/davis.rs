@@ -30,14 +30,10 @@ fn run() -> Res<()> {
         .map_or_else(|| std::env::temp_dir().join("romo_davis"), PathBuf::from);
     let opts = common::romo_options()?;
     let only = common::sequences();
-    let step = match std::env::var("FRAME_STEP") {
-        Ok(v) => v
-            .parse::<usize>()
-            .ok()
-            .filter(|n| *n > 0)
-            .ok_or_else(|| format!("FRAME_STEP: expected a positive integer, got {v:?}"))?,
-        Err(_) => 1,
-    };
+    let step: usize = common::env_or("FRAME_STEP", 1)?;
+    if step == 0 {
+        return Err("FRAME_STEP=0: need a positive step".into());
+    }
     let mut rows = vec![];
     let mut js = vec![];
     let imgs = davis.join("JPEGImages/480p");

@@ -60,10 +60,7 @@ fn run() -> Res<()> {
     let mut opts = common::romo_options()?;
     opts.record_stages = true;
     let only = common::sequences();
-    let maxf: usize = match std::env::var("MAXF") {
-        Ok(s) => s.parse().map_err(|e| format!("MAXF={s}: {e}"))?,
-        Err(_) => usize::MAX,
-    };
+    let maxf: usize = common::env_or("MAXF", usize::MAX)?;
     let data = loader::davis::Davis::open(&davis, "480p")
         .map_err(|e| format!("{}: {e}", davis.display()))?;
     let mut sums = [0.0f64; 4];

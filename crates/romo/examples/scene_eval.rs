@@ -20,12 +20,7 @@ fn run() -> Res<()> {
     let out = std::env::var_os("OUT").map_or_else(|| dir.join("romo_eval"), PathBuf::from);
     let mut opts = common::romo_options()?;
     opts.out = Some(out.clone());
-    let downscale = match std::env::var("DOWNSCALE") {
-        Ok(v) => v
-            .parse::<u32>()
-            .map_err(|e| format!("DOWNSCALE={v}: {e}"))?,
-        Err(_) => 1,
-    };
+    let downscale: u32 = common::env_or("DOWNSCALE", 1)?;
     let load = |downscale| {
         loader::scene::Scene::load(&dir, &loader::scene::SceneOptions { downscale })
             .map_err(|e| format!("{}: {e}", dir.display()))

@@ -638,22 +638,19 @@ pub fn train_restarts(
             _ => last(a) < last(b),
         }
     };
-    let mut best = start(0);
-    let keep_better = |range: std::ops::Range<usize>, best: &mut (Mlp, TrainReport)| {
-        for j in range {
-            let c = start(j as u64);
-            if better(&c.1, &best.1) {
-                *best = c;
-            }
-        }
+    // The best of `best` and the starts `range`, trained in order.
+    let pick = |best, range: std::ops::Range<usize>| {
+        range.map(|j| start(j as u64)).fold(
+            best,
+            |b: (Mlp, TrainReport), c| if better(&c.1, &b.1) { c } else { b },
+        )
     };
-    keep_better(1..o.restarts, &mut best);
-    let tried = if fits(&best.1) {
-        o.restarts
+    let best = pick(start(0), 1..o.restarts);
+    let (mut best, tried) = if fits(&best.1) {
+        (best, o.restarts)
     } else {
         let most = o.restarts.saturating_add(o.refit_starts);
-        keep_better(o.restarts..most, &mut best);
-        most
+        (pick(best, o.restarts..most), most)
     };
     best.1.starts = tried;
     best

@@ -39,6 +39,19 @@ pub fn romo_options() -> Res<romo::RomoOptions> {
     })
 }
 
+/// `$name` parsed as a `T`, `default` when unset; a value that does not
+/// parse is an error naming the variable and the value.
+pub fn env_or<T>(name: &str, default: T) -> Res<T>
+where
+    T: std::str::FromStr,
+    T::Err: std::fmt::Display,
+{
+    match std::env::var(name) {
+        Ok(v) => Ok(v.parse().map_err(|e| format!("{name}={v}: {e}"))?),
+        Err(_) => Ok(default),
+    }
+}
+
 /// `$SEQS`: the comma-separated sequences to run (None: all).
 pub fn sequences() -> Option<Vec<String>> {
     std::env::var("SEQS")
