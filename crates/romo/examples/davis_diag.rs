@@ -5,7 +5,7 @@
 //! (J / precision / recall at the threshold) and after refinement to full
 //! resolution. Env as in the `davis` example (`DAVIS_DIR`, default
 //! `../shared/data/davis2016` beside the repository; `ROMO_OPTS`; `SEQS`),
-//! plus `MAXF` (first N frames only) and `DUMP` (a folder for
+//! plus `MAXF` (first N frames only), `FRAME_STEP` (every N-th frame) and `DUMP` (a folder for
 //! frame | U/L | probability | truth images). Any folder with
 //! `JPEGImages/480p/<seq>/` and `Annotations/480p/<seq>/` (255 = moving)
 //! works, e.g. a generated scene's `images/` and `gt_motion/` linked in.
@@ -61,6 +61,10 @@ fn run() -> Res<()> {
     opts.record_stages = true;
     let only = common::sequences();
     let maxf: usize = common::env_or("MAXF", usize::MAX)?;
+    let step: usize = common::env_or("FRAME_STEP", 1)?;
+    if step == 0 {
+        return Err("FRAME_STEP=0: need a positive step".into());
+    }
     let data = loader::davis::Davis::open(&davis, "480p")
         .map_err(|e| format!("{}: {e}", davis.display()))?;
     let mut sums = [0.0f64; 4];
@@ -69,7 +73,12 @@ fn run() -> Res<()> {
         if only.as_ref().is_some_and(|o| !o.contains(&s)) {
             continue;
         }
-        let mut frames = data.sequence(&s)?.frames;
+        let mut frames: Vec<_> = data
+            .sequence(&s)?
+            .frames
+            .into_iter()
+            .step_by(step)
+            .collect();
         frames.truncate(maxf);
         let paths: Vec<PathBuf> = frames.iter().map(|f| f.image.clone()).collect();
         let src = romo::scene::PathSource {

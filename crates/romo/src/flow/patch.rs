@@ -267,6 +267,9 @@ pub(super) struct StripeCtx<'a> {
     pub(super) iters: usize,
     pub(super) search_radius: usize,
     pub(super) step: f32,
+    /// A whole-image displacement tried as one more start for every patch
+    /// in the first pass (see `DisOptions::global_search`).
+    pub(super) global: Option<Cand>,
 }
 
 multiversion! {
@@ -299,6 +302,16 @@ multiversion! {
                     let p = pat(k);
                     let own = known[k].unwrap_or_else(|| img.kernel::<P>(p, s[k].0, s[k].1));
                     let mut best = (cost(&own), s[k], own);
+                    if pass == 0
+                        && let Some(g) = ctx.global
+                        && g != best.1
+                    {
+                        let m = img.kernel::<P>(p, g.0, g.1);
+                        let cg = cost(&m);
+                        if cg < best.0 {
+                            best = (cg, g, m);
+                        }
+                    }
                     let mut try_cand = |j: usize| {
                         // Equal flows have equal costs: skip the evaluation.
                         if s[j] != best.1 {
