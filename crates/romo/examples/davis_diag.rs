@@ -5,10 +5,11 @@
 //! (J / precision / recall at the threshold) and after refinement to full
 //! resolution. Env as in the `davis` example (`DAVIS_DIR`, default
 //! `../shared/data/davis2016` beside the repository; `ROMO_OPTS`; `SEQS`),
-//! plus `MAXF` (first N frames only), `FRAME_STEP` (every N-th frame) and `DUMP` (a folder for
-//! frame | U/L | probability | truth images). Any folder with
-//! `JPEGImages/480p/<seq>/` and `Annotations/480p/<seq>/` (255 = moving)
-//! works, e.g. a generated scene's `images/` and `gt_motion/` linked in.
+//! plus `MAXF` (first N frames only), `FRAME_STEP` (every N-th frame) and
+//! `DUMP` (a folder for frame | U/L | probability | truth images). Any
+//! folder with `JPEGImages/480p/<seq>/` and `Annotations/480p/<seq>/` (255 =
+//! moving) works, e.g. a generated scene's `images/` and `gt_motion/`
+//! linked in.
 mod common;
 use common::Res;
 use romo::plane::{Plane, Rgb};
