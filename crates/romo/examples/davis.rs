@@ -30,10 +30,7 @@ fn run() -> Res<()> {
         .map_or_else(|| std::env::temp_dir().join("romo_davis"), PathBuf::from);
     let opts = common::romo_options()?;
     let only = common::sequences();
-    let step: usize = common::env_or("FRAME_STEP", 1)?;
-    if step == 0 {
-        return Err("FRAME_STEP=0: need a positive step".into());
-    }
+    let step = common::frame_step()?;
     let mut rows = vec![];
     let mut js = vec![];
     let imgs = davis.join("JPEGImages/480p");

@@ -62,10 +62,7 @@ fn run() -> Res<()> {
     opts.record_stages = true;
     let only = common::sequences();
     let maxf: usize = common::env_or("MAXF", usize::MAX)?;
-    let step: usize = common::env_or("FRAME_STEP", 1)?;
-    if step == 0 {
-        return Err("FRAME_STEP=0: need a positive step".into());
-    }
+    let step = common::frame_step()?;
     let data = loader::davis::Davis::open(&davis, "480p")
         .map_err(|e| format!("{}: {e}", davis.display()))?;
     let mut sums = [0.0f64; 4];

@@ -52,6 +52,14 @@ where
     }
 }
 
+/// `$FRAME_STEP`: keep every N-th frame (default 1); 0 is an error.
+pub fn frame_step() -> Res<usize> {
+    match env_or("FRAME_STEP", 1)? {
+        0 => Err("FRAME_STEP=0: need a positive step".into()),
+        step => Ok(step),
+    }
+}
+
 /// `$SEQS`: the comma-separated sequences to run (None: all).
 pub fn sequences() -> Option<Vec<String>> {
     std::env::var("SEQS")

@@ -302,39 +302,32 @@ multiversion! {
                     let p = pat(k);
                     let own = known[k].unwrap_or_else(|| img.kernel::<P>(p, s[k].0, s[k].1));
                     let mut best = (cost(&own), s[k], own);
-                    if pass == 0
-                        && let Some(g) = ctx.global
-                        && g != best.1
-                    {
-                        let m = img.kernel::<P>(p, g.0, g.1);
-                        let cg = cost(&m);
-                        if cg < best.0 {
-                            best = (cg, g, m);
-                        }
-                    }
-                    let mut try_cand = |j: usize| {
+                    let mut try_flow = |f: Cand| {
                         // Equal flows have equal costs: skip the evaluation.
-                        if s[j] != best.1 {
-                            let m = img.kernel::<P>(p, s[j].0, s[j].1);
-                            let cj = cost(&m);
-                            if cj < best.0 {
-                                best = (cj, s[j], m);
+                        if f != best.1 {
+                            let m = img.kernel::<P>(p, f.0, f.1);
+                            let cf = cost(&m);
+                            if cf < best.0 {
+                                best = (cf, f, m);
                             }
                         }
                     };
                     if pass == 0 {
+                        if let Some(g) = ctx.global {
+                            try_flow(g);
+                        }
                         if c > 0 {
-                            try_cand(k - 1);
+                            try_flow(s[k - 1]);
                         }
                         if r > 0 {
-                            try_cand(k - nx);
+                            try_flow(s[k - nx]);
                         }
                     } else {
                         if c + 1 < nx {
-                            try_cand(k + 1);
+                            try_flow(s[k + 1]);
                         }
                         if r + 1 < rows {
-                            try_cand(k + nx);
+                            try_flow(s[k + nx]);
                         }
                     }
                     (s[k], known[k]) = img.align::<P>(p, best.1, best.2, per_pass, ctx.step);
