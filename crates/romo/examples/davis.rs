@@ -44,10 +44,25 @@ fn run() -> Res<()> {
         let t = std::time::Instant::now();
         let rep = romo::segment_paths(&paths, &names, &out.join(&s), &opts, &|_, _, _| {})?;
         let secs = t.elapsed().as_secs_f64();
-        let m = romo::metrics::evaluate_sequence(
+        // Only this run's frames are scored: `OUT` may hold masks of other
+        // frames from an earlier run (another `FRAME_STEP`).
+        let ann = davis.join("Annotations/480p").join(&s);
+        let stem = |p: &PathBuf| {
+            p.file_stem()
+                .map(|x| x.to_string_lossy().into_owned())
+                .unwrap_or_default()
+        };
+        let ours: Vec<String> = paths.iter().map(stem).collect();
+        let others: Vec<String> = sorted_entries(&ann)?
+            .iter()
+            .map(stem)
+            .filter(|x| !ours.contains(x))
+            .collect();
+        let m = romo::metrics::evaluate_sequence_excluding(
             &out.join(&s).join("masks"),
-            &davis.join("Annotations/480p").join(&s),
+            &ann,
             &s,
+            &others,
         )?;
         let mean = |f: &dyn Fn(&romo::FrameReport) -> f32| {
             rep.frames.iter().map(|x| f(x) as f64).sum::<f64>() / rep.frames.len() as f64

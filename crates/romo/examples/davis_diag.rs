@@ -6,7 +6,8 @@
 //! resolution. Env as in the `davis` example (`DAVIS_DIR`, default
 //! `../shared/data/davis2016` beside the repository; `ROMO_OPTS`; `SEQS`),
 //! plus `MAXF` (first N frames only), `FRAME_STEP` (every N-th frame) and
-//! `DUMP` (a folder for frame | U/L | probability | truth images). Any
+//! `DUMP` (a folder for frame | U/L | probability | truth images) and `RAW`
+//! (a folder for every frame's grid channels as raw f32, see [`raw`]). Any
 //! folder with `JPEGImages/480p/<seq>/` and `Annotations/480p/<seq>/` (255 =
 //! moving) works, e.g. a generated scene's `images/` and `gt_motion/`
 //! linked in.
@@ -141,6 +142,9 @@ fn run() -> Res<()> {
                 );
             }
             let frame = Rgb::from_image(&loader::io::read_rgb32f(p)?);
+            if let Ok(d) = std::env::var("RAW") {
+                raw(&d, &s, i, &seg, &gt_grid, &frame.resize(gw, gh))?;
+            }
             if let Ok(d) = std::env::var("DUMP")
                 && i % 10 == 0
             {
@@ -199,6 +203,36 @@ fn run() -> Res<()> {
         sums[2] / k,
         sums[3] / k
     );
+    Ok(())
+}
+
+/// `DIR/<seq>_<i>.f32`: the grid's channels as little-endian f32, each
+/// `w × h`: residual ÷ v (NaN: none), U, L, every recorded stage, truth,
+/// R, G, B. `DIR/<seq>.json` names them.
+fn raw(d: &str, s: &str, i: usize, seg: &romo::Segmentation, gt: &[bool], rgb: &Rgb) -> Res<()> {
+    std::fs::create_dir_all(d)?;
+    let v = seg.mean_flow[i].max(1e-6);
+    let mut names = vec!["s_over_v".to_string(), "u".into(), "l".into()];
+    let mut out: Vec<f32> = seg.residual[i].iter().map(|x| x / v).collect();
+    out.extend(seg.u[i].iter().map(|b| *b as u8 as f32));
+    out.extend(seg.l[i].iter().map(|b| *b as u8 as f32));
+    for (name, st) in &seg.stages {
+        names.push(name.clone());
+        out.extend(&st[i].data);
+    }
+    names.push("gt".into());
+    out.extend(gt.iter().map(|b| *b as u8 as f32));
+    for (k, c) in ["r", "g", "b"].iter().enumerate() {
+        names.push(c.to_string());
+        out.extend(&rgb.c[k].data);
+    }
+    let bytes: Vec<u8> = out.iter().flat_map(|x| x.to_le_bytes()).collect();
+    std::fs::write(format!("{d}/{s}_{i:03}.f32"), bytes)?;
+    let (w, h) = seg.report.grid;
+    std::fs::write(
+        format!("{d}/{s}.json"),
+        format!("{{\"w\":{w},\"h\":{h},\"channels\":{names:?}}}"),
+    )?;
     Ok(())
 }
 

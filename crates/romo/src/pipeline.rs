@@ -337,6 +337,11 @@ pub struct Segmentation {
     pub u: Vec<Vec<bool>>,
     /// Last round's L (likely static) labels per frame on the grid.
     pub l: Vec<Vec<bool>>,
+    /// Last round's residual per frame on the grid: `max(S_fwd, S_bwd)` in
+    /// grid px, NaN where no side is valid.
+    pub residual: Vec<Vec<f32>>,
+    /// Last round's mean flow magnitude `v` per frame (grid px).
+    pub mean_flow: Vec<f32>,
     /// Diagnostics.
     pub report: RomoReport,
     /// With `RomoOptions::record_stages`: the grid probabilities after each
@@ -899,6 +904,8 @@ pub fn segment_frames(
         probs: planes,
         u: labels.iter().map(|l| l.u.clone()).collect(),
         l: labels.iter().map(|l| l.l.clone()).collect(),
+        residual: labels.iter().map(|l| l.s.clone()).collect(),
+        mean_flow: labels.iter().map(|l| l.v).collect(),
         report,
         stages,
     })
