@@ -62,6 +62,16 @@ pub struct CompositeOptions {
     /// runner or a car. Default false (objects cross the frame).
     #[serde(default)]
     pub follow: bool,
+    /// Objects pasted into each clutter frame (default 1). Each is its own
+    /// run of DAVIS frames with its own sequence, size and path; later ones
+    /// are pasted over earlier ones. Several make the heavier clutter of a
+    /// crowded place.
+    #[serde(default = "one")]
+    pub objects_per_frame: usize,
+}
+
+fn one() -> usize {
+    1
 }
 
 impl Default for CompositeOptions {
@@ -77,6 +87,7 @@ impl Default for CompositeOptions {
             resolution: "480p".into(),
             seed: 0,
             follow: false,
+            objects_per_frame: 1,
         }
     }
 }
@@ -91,8 +102,8 @@ impl CompositeOptions {
         if self.test_every < 2 {
             return bad("test_every must be >= 2");
         }
-        if self.run_length == 0 || self.davis_stride == 0 {
-            return bad("run_length and davis_stride must be >= 1");
+        if self.run_length == 0 || self.davis_stride == 0 || self.objects_per_frame == 0 {
+            return bad("run_length, davis_stride and objects_per_frame must be >= 1");
         }
         let [a, b] = self.object_height;
         if !(a > 0.0 && a <= b && b <= 2.0) {
@@ -214,7 +225,9 @@ pub struct CompositeReport {
     pub frames: usize,
     pub clutter: usize,
     pub extra: usize,
-    /// Per clutter frame: (image name, DAVIS sequence, DAVIS frame, fraction of pixels pasted).
+    /// Per clutter frame: (image name, DAVIS sequences, DAVIS frames,
+    /// fraction of pixels pasted); with several objects per frame the
+    /// sequences and frames are joined by `+`.
     pub pasted: Vec<(String, String, String, f64)>,
     /// Mean / min / max distractor coverage over clutter frames.
     pub coverage_mean: f64,
@@ -294,7 +307,12 @@ pub fn composite(
     let clutter_idx: Vec<usize> = (0..names.len())
         .filter(|i| i % opts.test_every != 0)
         .collect();
-    let runs = plan_runs(clutter_idx.len(), &sequences, opts, &mut rng);
+    // One list of runs per object slot, drawn in slot order; slot `j` is
+    // `j` sequences ahead, so the objects of one frame differ while there
+    // are enough, and slot 0 is the one-object scene's.
+    let lanes: Vec<Vec<Run>> = (0..opts.objects_per_frame)
+        .map(|j| plan_runs(clutter_idx.len(), j, &sequences, opts, &mut rng))
+        .collect();
 
     for (i, name) in names.iter().enumerate() {
         let mut img = downscaled(&background.join("images").join(name), opts.downscale)?;
@@ -306,23 +324,28 @@ pub fn composite(
         let mut moving = GrayImage::new(w, h);
         if let Some(k) = clutter_idx.iter().position(|&c| c == i) {
             write_png_rgb8(out.join("clean").join(&out_name), &img)?;
-            let run = &runs[k / opts.run_length];
             let t = k % opts.run_length;
-            let seq = &sequences[run.seq];
-            let fi = (run.start + t * opts.davis_stride) % seq.frames.len();
-            let f = &seq.frames[fi];
-            let (obj, mask) = davis_frame(&f.image, f.annotation.as_ref(), &seq.name)?;
-            let n = match run.placement(&mask, t, (w, h), opts) {
-                Some(place) => paste(&mut img, &mut moving, &obj, &mask, place),
-                None => 0,
-            };
+            let (mut seqs, mut frames) = (Vec::new(), Vec::new());
+            for lane in &lanes {
+                let run = &lane[k / opts.run_length];
+                let seq = &sequences[run.seq];
+                let fi = (run.start + t * opts.davis_stride) % seq.frames.len();
+                let f = &seq.frames[fi];
+                let (obj, mask) = davis_frame(&f.image, f.annotation.as_ref(), &seq.name)?;
+                if let Some(place) = run.placement(&mask, t, (w, h), opts) {
+                    paste(&mut img, &mut moving, &obj, &mask, place);
+                }
+                seqs.push(seq.name.clone());
+                frames.push(f.name.clone());
+            }
+            let n = moving.pixels().filter(|p| p[0] == 255).count();
             let cov = n as f64 / (w as f64 * h as f64);
             report.coverage_mean += cov;
             report.coverage_min = report.coverage_min.min(cov);
             report.coverage_max = report.coverage_max.max(cov);
             report
                 .pasted
-                .push((out_name.clone(), seq.name.clone(), f.name.clone(), cov));
+                .push((out_name.clone(), seqs.join("+"), frames.join("+"), cov));
             clutter.push(out_name.clone());
         } else {
             extra.push(out_name.clone());
@@ -430,16 +453,18 @@ impl Run {
     }
 }
 
-/// The runs covering `clutter` frames, drawn from `rng`.
+/// The runs covering `clutter` frames for object slot `lane`, drawn from
+/// `rng`.
 fn plan_runs(
     clutter: usize,
+    lane: usize,
     sequences: &[DavisSequence],
     opts: &CompositeOptions,
     rng: &mut rand_pcg::Pcg64,
 ) -> Vec<Run> {
     let mut runs = Vec::new();
     for r in 0..clutter.div_ceil(opts.run_length) {
-        let seq = r % sequences.len();
+        let seq = (r + lane) % sequences.len();
         let span = (opts.run_length - 1) * opts.davis_stride + 1;
         let n = sequences[seq].frames.len();
         let start = if n > span {

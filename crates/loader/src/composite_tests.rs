@@ -199,6 +199,46 @@ fn a_followed_object_keeps_its_place_in_the_image() {
 }
 
 #[test]
+fn several_objects_per_frame_add_up() {
+    let dir = tempfile::tempdir().unwrap();
+    let (bg, dv) = (dir.path().join("bg"), dir.path().join("davis"));
+    background(&bg, 9, 32, 24);
+    davis(&dv, "car", 30, 16, 16, (16, 16));
+    davis(&dv, "swan", 30, 16, 16, (16, 16));
+    let run = |n: usize| {
+        let out = dir.path().join(format!("out{n}"));
+        let opts = CompositeOptions {
+            downscale: 1,
+            run_length: 4,
+            objects_per_frame: n,
+            object_height: [0.3, 0.3],
+            ..Default::default()
+        };
+        (composite(&bg, &dv, &out, &opts), out)
+    };
+    let (one, _) = run(1);
+    let (two, out2) = run(2);
+    let (one, two) = (one.unwrap(), two.unwrap());
+    // The first slot is the one-object scene's, so the two-object frames
+    // hold it and more; each frame names both sequences.
+    for (a, b) in one.pasted.iter().zip(&two.pasted) {
+        assert_eq!(a.0, b.0);
+        assert!(b.3 >= a.3, "{} covers {} < {}", b.0, b.3, a.3);
+        let seqs: Vec<&str> = b.1.split('+').collect();
+        assert_eq!(seqs.len(), 2, "{}", b.1);
+        assert_ne!(seqs[0], seqs[1]);
+        assert!(b.1.starts_with(&a.1));
+        // The reported coverage is the ground truth's.
+        let gt = read_gray8(out2.join("gt_motion").join(&b.0)).unwrap();
+        let n = gt.pixels().filter(|p| p[0] == 255).count();
+        assert!((b.3 - n as f64 / (32.0 * 24.0)).abs() < 1e-12);
+    }
+    assert!(two.coverage_mean > one.coverage_mean);
+    let e = run(0).0.unwrap_err().to_string();
+    assert!(e.contains("objects_per_frame"), "{e}");
+}
+
+#[test]
 fn downscale_scales_images_and_intrinsics() {
     let dir = tempfile::tempdir().unwrap();
     let (bg, dv, out) = (

@@ -11,8 +11,9 @@ use crate::flow::dis::DisOptions;
 use crate::flow::{Flow, FlowEstimator};
 use crate::geometry::robust::{FitReport, ModelSelection};
 use crate::labels::{
-    FrameLabels, LabelOptions, PairFit, Side, apply_three_view, cycle_valid, fit_pair,
-    frame_labels, occlusion_violations, propagate_u, three_view_residuals,
+    FrameLabels, LabelOptions, NoFit, PairResult, Side, apply_three_view, cycle_valid,
+    drop_unreliable_fits, fit_pair, frame_labels, occlusion_violations, propagate_u,
+    three_view_residuals,
 };
 use crate::mlp::{Label, Mlp, MlpOptions, TrainReport, train, train_restarts};
 use crate::objects::{Evidence, ObjectMethod, graph_cut};
@@ -304,8 +305,9 @@ pub struct RomoReport {
     /// split.json `extra` views given all-keep masks (not part of the video).
     pub held_out_views: usize,
     /// Pairs (p = frames p, p+1) left out: a frame without texture, too few
-    /// cycle-consistent correspondences, or no model could be fitted. Their
-    /// frames are labelled from their other neighbour.
+    /// cycle-consistent correspondences, no model could be fitted, or its
+    /// fit was unreliable (`LabelOptions::max_sigma_ratio`). Their frames
+    /// are labelled from their other neighbour.
     pub skipped_pairs: Vec<SkippedPair>,
     /// Frames with no usable pair on either side: no evidence of motion, so
     /// they are kept whole (probability 0).
@@ -647,23 +649,23 @@ pub fn gradient_mask(g: &Plane, thr: f32) -> Vec<bool> {
 
 /// Labels of every frame and the fit of every pair in one round (None for
 /// a pair that is unusable or could not be fitted, with the reason).
-type RoundLabels = (Vec<FrameLabels>, Vec<std::result::Result<PairFit, String>>);
+type RoundLabels = (Vec<FrameLabels>, Vec<PairResult>);
 
 /// Fit every usable pair (excluding pixels in `moving`, per frame) and
 /// label every frame from the pairs on either side that were fitted.
 fn label_round(
     pr: &Prepared,
     moving: Option<&[Vec<bool>]>,
-    prev: Option<&[std::result::Result<PairFit, String>]>,
+    prev: Option<&[PairResult]>,
     o: &RomoOptions,
     round: usize,
 ) -> RoundLabels {
     let np = pr.fwd.len();
-    let fits: Vec<std::result::Result<PairFit, String>> = (0..np)
+    let fits: Vec<PairResult> = (0..np)
         .into_par_iter()
         .map(|p| {
             if let Some(why) = &pr.unusable[p] {
-                return Err(why.clone());
+                return Err(NoFit::Failed(why.clone()));
             }
             let usable: Vec<bool> = match moving {
                 Some(m) => pr.valid_f[p]
@@ -689,9 +691,15 @@ fn label_round(
             let focal = Some(pr.grid_focal);
             fit_pair(&pr.fwd[p], &usable, &lo, seed, focal)
                 .or_else(|_| fit_pair(&pr.fwd[p], &pr.valid_f[p], &lo, seed, focal))
-                .map_err(|e| format!("no model could be fitted ({e})"))
+                .map_err(|e| NoFit::Failed(format!("no model could be fitted ({e})")))
         })
         .collect();
+    let mut fits = fits;
+    drop_unreliable_fits(
+        &mut fits,
+        o.labels.max_sigma_ratio,
+        o.labels.robust.min_sigma_px,
+    );
     let (gw, gh) = (pr.fwd[0].w(), pr.fwd[0].h());
     let labels = (0..=np)
         .into_par_iter()
@@ -764,7 +772,7 @@ fn label_round(
 fn apply_occlusion(
     fl: &mut FrameLabels,
     pr: &Prepared,
-    fits: &[std::result::Result<PairFit, String>],
+    fits: &[PairResult],
     t: usize,
     o: &LabelOptions,
 ) {
@@ -1136,11 +1144,11 @@ fn mark_image_fixed(planes: &mut [Plane], pr: &Prepared, o: &RomoOptions, report
 }
 
 /// Report the skipped pairs, and keep whole (probability 0) the frames
-/// without a usable pair on either side: they carry no evidence of motion,
-/// so the MLP's guess on them is not trusted.
+/// whose pairs on both sides failed ([`NoFit::Failed`]): they carry no
+/// evidence of motion, so the MLP's guess on them is not trusted.
 fn keep_frames_without_evidence(
     planes: &mut [Plane],
-    fits: &[std::result::Result<PairFit, String>],
+    fits: &[PairResult],
     report: &mut RomoReport,
 ) {
     let np = fits.len();
@@ -1152,13 +1160,16 @@ fn keep_frames_without_evidence(
             ));
             report.skipped_pairs.push(SkippedPair {
                 pair: p,
-                reason: reason.clone(),
+                reason: reason.to_string(),
             });
         }
     }
     for (t, plane) in planes.iter_mut().enumerate() {
-        let fwd_ok = t < np && fits[t].is_ok();
-        let bwd_ok = t > 0 && fits[t - 1].is_ok();
+        // A pair with a fit it does not trust still leaves the frame's
+        // appearance to the MLP; only failed pairs leave nothing.
+        let evidence = |f: &PairResult| !matches!(f, Err(NoFit::Failed(_)));
+        let fwd_ok = t < np && evidence(&fits[t]);
+        let bwd_ok = t > 0 && evidence(&fits[t - 1]);
         if !fwd_ok && !bwd_ok {
             plane.data.fill(0.0);
             report.no_evidence_frames.push(t);
@@ -1180,7 +1191,7 @@ fn keep_frames_without_evidence(
 /// Per-frame and per-pair diagnostics of the last round.
 fn report_frames(
     labels: &[FrameLabels],
-    fits: &[std::result::Result<PairFit, String>],
+    fits: &[PairResult],
     planes: &[Plane],
     o: &RomoOptions,
     report: &mut RomoReport,

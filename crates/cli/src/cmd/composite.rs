@@ -40,9 +40,23 @@ pub struct Args {
     /// runner or a car).
     #[arg(long)]
     pub follow: bool,
+    /// Objects pasted into each clutter frame, each with its own sequence,
+    /// size and path (heavier clutter: 3 or more).
+    #[arg(long, default_value_t = 1)]
+    pub objects_per_frame: usize,
+    /// Pasted object height as a fraction of the frame height, drawn per
+    /// run from MIN,MAX.
+    #[arg(long, value_delimiter = ',', default_values_t = [0.3, 0.55])]
+    pub object_height: Vec<f64>,
 }
 
 pub fn run(args: &Args, ctx: &Ctx) -> anyhow::Result<serde_json::Value> {
+    let &[lo, hi] = args.object_height.as_slice() else {
+        anyhow::bail!(
+            "--object-height takes MIN,MAX, got {} values",
+            args.object_height.len()
+        );
+    };
     let opts = CompositeOptions {
         downscale: args.downscale,
         test_every: args.test_every,
@@ -50,6 +64,8 @@ pub fn run(args: &Args, ctx: &Ctx) -> anyhow::Result<serde_json::Value> {
         sequences: args.sequences.clone(),
         seed: args.seed,
         follow: args.follow,
+        objects_per_frame: args.objects_per_frame,
+        object_height: [lo, hi],
         ..Default::default()
     };
     let t0 = std::time::Instant::now();
