@@ -309,8 +309,8 @@ pub struct RomoReport {
     /// fit was unreliable (`LabelOptions::max_sigma_ratio`). Their frames
     /// are labelled from their other neighbour.
     pub skipped_pairs: Vec<SkippedPair>,
-    /// Frames with no usable pair on either side: no evidence of motion, so
-    /// they are kept whole (probability 0).
+    /// Frames whose pairs on both sides failed (unusable or not fitted): no
+    /// evidence of motion, so they are kept whole (probability 0).
     pub no_evidence_frames: Vec<usize>,
     /// One line per problem the run worked around (skipped pairs, frames
     /// without evidence), for the user.
@@ -647,8 +647,9 @@ pub fn gradient_mask(g: &Plane, thr: f32) -> Vec<bool> {
         .collect()
 }
 
-/// Labels of every frame and the fit of every pair in one round (None for
-/// a pair that is unusable or could not be fitted, with the reason).
+/// Labels of every frame and the fit of every pair in one round (`Err` for
+/// a pair that is unusable, could not be fitted or was not trusted, with
+/// the reason).
 type RoundLabels = (Vec<FrameLabels>, Vec<PairResult>);
 
 /// Fit every usable pair (excluding pixels in `moving`, per frame) and
@@ -661,7 +662,7 @@ fn label_round(
     round: usize,
 ) -> RoundLabels {
     let np = pr.fwd.len();
-    let fits: Vec<PairResult> = (0..np)
+    let mut fits: Vec<PairResult> = (0..np)
         .into_par_iter()
         .map(|p| {
             if let Some(why) = &pr.unusable[p] {
@@ -694,7 +695,6 @@ fn label_round(
                 .map_err(|e| NoFit::Failed(format!("no model could be fitted ({e})")))
         })
         .collect();
-    let mut fits = fits;
     drop_unreliable_fits(
         &mut fits,
         o.labels.max_sigma_ratio,
