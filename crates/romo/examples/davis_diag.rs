@@ -228,11 +228,14 @@ fn raw(d: &str, s: &str, i: usize, seg: &romo::Segmentation, gt: &[bool], rgb: &
     }
     let bytes: Vec<u8> = out.iter().flat_map(|x| x.to_le_bytes()).collect();
     std::fs::write(format!("{d}/{s}_{i:03}.f32"), bytes)?;
-    let (w, h) = seg.report.grid;
-    std::fs::write(
-        format!("{d}/{s}.json"),
-        format!("{{\"w\":{w},\"h\":{h},\"channels\":{names:?}}}"),
-    )?;
+    // The channels are the same in every frame: name them once.
+    if i == 0 {
+        let (w, h) = seg.report.grid;
+        std::fs::write(
+            format!("{d}/{s}.json"),
+            format!("{{\"w\":{w},\"h\":{h},\"channels\":{names:?}}}"),
+        )?;
+    }
     Ok(())
 }
 

@@ -322,8 +322,10 @@ pub type PairResult = std::result::Result<PairFit, NoFit>;
 /// per frame, 29–63% of each frame moving: J 0.03 / 0.57 / 0.02 for seeds
 /// 0–2 without this, 0.02 / 0.63 / 0.72 with it). A pair whose
 /// σ̂ exceeds `ratio` × max(the median σ̂ of the fitted pairs, `floor`) is
-/// therefore treated as one that could not be fitted: its frames are
-/// labelled from their other neighbour. `ratio` 0 disables.
+/// therefore left out like one that could not be fitted (its frames are
+/// labelled from their other neighbour), except that a frame between two
+/// such pairs is still predicted by the MLP rather than kept whole.
+/// `ratio` 0 disables.
 pub fn drop_unreliable_fits(fits: &mut [PairResult], ratio: f64, floor: f64) {
     if ratio <= 0.0 {
         return;
