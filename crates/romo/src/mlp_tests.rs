@@ -175,6 +175,8 @@ fn restarts_keep_the_start_with_the_lowest_final_loss() {
     let mut o = MlpOptions {
         batch_size: 256,
         min_fit_recall: 0.0,
+        // The raised-weight trial has its own test.
+        raised_moving_weight: 0.0,
         ..Default::default()
     };
     let (one, r1) = train_restarts(c, &x, &l, 6, &o, 3, 9);
@@ -219,6 +221,8 @@ fn a_first_start_that_does_not_fit_u_is_replaced() {
     let mut o = MlpOptions {
         batch_size: 256,
         refit_starts: 3,
+        // The raised-weight trial has its own test.
+        raised_moving_weight: 0.0,
         ..Default::default()
     };
     // Two epochs leave the starts at different recalls of U.
@@ -298,4 +302,71 @@ fn avx2_and_baseline_kernels_agree_bit_for_bit() {
     assert!(hb.iter().zip(&hf).all(|(a, b)| a.to_bits() == b.to_bits()));
     // Not a trivial net: it has learnt the toy rule.
     assert!(rf.recall_moving > 0.8 && rf.recall_static > 0.8, "{rf:?}");
+}
+
+/// Toy samples whose U is relabelled static samples far from the toy's
+/// boundary (`x0 < −0.5`, half of them): U in two clusters.
+fn two_cluster_u(n: usize, c: usize, seed: u64) -> (Vec<f32>, Vec<Label>) {
+    let (x, mut l) = toy(n, c, seed);
+    let mut rng = rand_pcg::Pcg64::seed_from_u64(seed);
+    for i in 0..l.len() {
+        if l[i] == Label::Static && x[i * c] < -0.5 && rng.random_range(0.0..1.0) < 0.5 {
+            l[i] = Label::Moving;
+        }
+    }
+    (x, l)
+}
+
+/// The first round trains start 0 again at `raised_moving_weight` and keeps
+/// it only when its error rate under the base weight is lower. Two U
+/// clusters: the base weight gives up U, the raised one fits it and is
+/// kept. One cluster: the base weight fits most of U, the raised one buys
+/// the rest with more L than the base weight pays for, and is not kept.
+#[test]
+fn a_raised_u_weight_is_kept_only_when_it_errs_less_under_the_base_weight() {
+    let c = 4;
+    let o = MlpOptions {
+        batch_size: 256,
+        ..Default::default()
+    };
+    let raised = MlpOptions {
+        moving_weight: o.raised_moving_weight,
+        ..o.clone()
+    };
+    for (data, want_kept) in [(two_cluster_u(3000, c, 5), true), (toy(3000, c, 5), false)] {
+        let (x, l) = data;
+        let (kept, r) = train_restarts(c, &x, &l, 10, &o, 3, 9);
+        let mut by_hand = Mlp::new(c, 3);
+        let rr = train(&mut by_hand, &x, &l, 10, true, &raised, 9);
+        let t = r.weight_trial.clone().expect("the trial runs");
+        assert_eq!(t.raised_recall, (rr.recall_moving, rr.recall_static));
+        assert_eq!(t.raised_loss, error_rate(&rr, o.moving_weight));
+        assert_eq!(t.raised_kept, want_kept, "{t:?}");
+        assert_eq!(t.raised_kept, t.raised_loss < t.base_loss);
+        if want_kept {
+            assert_eq!(kept.p, by_hand.p);
+            assert_eq!(r.moving_weight, o.raised_moving_weight);
+            assert!(t.raised_recall.0 > t.base_recall.0 + 0.3, "{t:?}");
+        } else {
+            assert_eq!(r.moving_weight, o.moving_weight);
+            assert!(t.raised_recall.1 < t.base_recall.1, "{t:?}");
+        }
+        // The base weight's starts (refits when start 0 does not fit U)
+        // and the trial.
+        let base_starts = if t.base_recall.0 >= o.min_fit_recall {
+            1
+        } else {
+            1 + o.refit_starts
+        };
+        assert_eq!(r.starts, base_starts + 1);
+    }
+    // 0 turns the trial off.
+    let (x, l) = toy(3000, c, 5);
+    let off = MlpOptions {
+        raised_moving_weight: 0.0,
+        ..o
+    };
+    let (_, r) = train_restarts(c, &x, &l, 10, &off, 3, 9);
+    assert!(r.weight_trial.is_none());
+    assert_eq!(r.starts, 1);
 }

@@ -935,6 +935,8 @@ fn train_rounds(
     let mut mlp: Option<Mlp> = None;
     let mut probs: Vec<Vec<f32>> = Vec::new();
     let mut last: Option<RoundLabels> = None;
+    // The first round's choice ([`MlpOptions::raised_moving_weight`]).
+    let mut moving_weight = o.mlp.moving_weight;
     for round in 0..o.iterations {
         progress("geometry", round, o.iterations);
         let moving: Option<Vec<Vec<bool>>> = (round > 0).then(|| {
@@ -980,7 +982,10 @@ fn train_rounds(
                         &y,
                         o.mlp.epochs_per_round,
                         false,
-                        &o.mlp,
+                        &MlpOptions {
+                            moving_weight,
+                            ..o.mlp.clone()
+                        },
                         o.seed ^ round as u64,
                     );
                     (m, r)
@@ -996,6 +1001,7 @@ fn train_rounds(
                 ),
             }
         });
+        moving_weight = rep.moving_weight;
         report.rounds.push(rep);
         let m = mlp.insert(m);
         probs = tm.time("mlp", || pr.feats.iter().map(|f| m.predict(f)).collect());
