@@ -340,9 +340,9 @@ fn a_raised_u_weight_is_kept_only_when_it_errs_less_under_the_base_weight() {
         let rr = train(&mut by_hand, &x, &l, 10, true, &raised, 9);
         let t = r.weight_trial.clone().expect("the trial runs");
         assert_eq!(t.raised_recall, (rr.recall_moving, rr.recall_static));
-        assert_eq!(t.raised_loss, error_rate(&rr, o.moving_weight));
+        assert_eq!(t.raised_error, error_rate(&rr, o.moving_weight));
         assert_eq!(t.raised_kept, want_kept, "{t:?}");
-        assert_eq!(t.raised_kept, t.raised_loss < t.base_loss);
+        assert_eq!(t.raised_kept, t.raised_error < t.base_error);
         if want_kept {
             assert_eq!(kept.p, by_hand.p);
             assert_eq!(r.moving_weight, o.raised_moving_weight);

@@ -71,7 +71,7 @@ fn small_scene_masks_match_ground_truth_motion() {
     } else {
         o.moving_weight
     };
-    assert_eq!(trial.raised_kept, trial.raised_loss < trial.base_loss);
+    assert_eq!(trial.raised_kept, trial.raised_error < trial.base_error);
     assert!(
         report.rounds.iter().all(|r| r.moving_weight == chosen),
         "{:?}",
