@@ -85,7 +85,7 @@ fn run() -> Res<()> {
         rows.push(serde_json::json!({"sequence": s, "j": m.j_mean, "precision": m.precision, "recall": m.recall, "j_recall": m.j_recall,
             "u_cov": mean(&|f| f.u_coverage), "l_cov": mean(&|f| f.l_coverage), "h_pairs": nh, "dropped": rep.dropped_frames.len(),
             "frames": names.len(), "seconds": secs, "skipped_pairs": rep.skipped_pairs, "no_evidence_frames": rep.no_evidence_frames, "timings_ms": rep.timings_ms,
-            "rounds": rep.rounds.iter().map(|r| serde_json::json!({"recall_moving": r.recall_moving, "recall_static": r.recall_static, "starts": r.starts, "moving_weight": r.moving_weight, "weight_trial": r.weight_trial})).collect::<Vec<_>>(),
+            "rounds": rep.rounds,
             "pairs": rep.pairs.iter().map(|p| format!("{} {:.3} {:.3}", p.model, p.u_fraction_f, p.sigma_px)).collect::<Vec<_>>()}));
     }
     let mj = js.iter().sum::<f64>() / js.len().max(1) as f64;

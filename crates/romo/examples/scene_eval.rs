@@ -53,8 +53,7 @@ fn run() -> Res<()> {
         "{}",
         serde_json::json!({"j": s.j_mean, "precision": s.precision, "recall": s.recall,
             "u_cov": u, "l_cov": l, "h_pairs": nh, "seconds": secs, "timings_ms": rep.timings_ms,
-            "rounds": rep.rounds.iter().map(|r| serde_json::json!({"recall_moving": r.recall_moving,
-                "recall_static": r.recall_static, "starts": r.starts, "collapsed": r.collapsed, "moving_weight": r.moving_weight, "weight_trial": r.weight_trial})).collect::<Vec<_>>()})
+            "rounds": rep.rounds})
     );
     Ok(())
 }
