@@ -86,9 +86,9 @@ fn small_scene_masks_match_ground_truth_motion() {
     // Over the 24 video frames, default options, seed 0 (bit-reproducible,
     // also across thread counts: training sums in a fixed order): J 0.891,
     // P 0.94, R 0.94 (U weight 0.35 kept). The pedestrians cross sideways
-    // while the camera dollies sideways, so much of their motion lies along epipolar lines
-    // where the Sampson residual cannot see it; the cheirality and
-    // three-view tests recover part of it.
+    // while the camera dollies sideways, so much of their motion lies along
+    // epipolar lines where the Sampson residual cannot see it; the
+    // cheirality and three-view tests recover part of it.
     // Thresholds a bit below the measurement.
     assert!(m.precision >= 0.85, "precision {}", m.precision);
     assert!(
