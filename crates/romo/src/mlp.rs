@@ -114,9 +114,10 @@ pub struct MlpOptions {
     /// audience DAVIS does not annotate), where a fixed 0.7 gives mean J
     /// 0.592 (goat 0.695 → 0.223). Over seeds 0–2, 3 of 24 DAVIS runs keep
     /// 0.7 (mean 0.707 → 0.702); at every third frame goat's seed 0 keeps
-    /// it and falls from 0.602 to 0.181: its U is the near rocks' parallax,
-    /// flagged in pairs scored by a homography (F explains every fit point,
-    /// the followed goat included; GMFlow does no better), which no
+    /// it and falls from 0.602 to 0.181: its U lies mostly off the goat (the
+    /// near rocks' parallax in pairs scored by a homography, where F
+    /// explains every fit point, the followed goat included; under F alone
+    /// U precision is still 0.42; GMFlow does no better), which no
     /// comparison on the labels can tell from a mover.
     ///
     /// The error rate compares the networks, not the smoothed loss: at
