@@ -23,7 +23,19 @@ pub struct PairStats {
     pub general: usize,
     /// Verified pairs explained by a homography (rotation or a flat scene).
     pub homography: usize,
+    /// Images in the database.
+    #[serde(default)]
+    pub images: usize,
+    /// SIFT keypoints over all images (after masking).
+    #[serde(default)]
+    pub keypoints: usize,
 }
+
+/// Fewer keypoints per image than this on average and matching fails for
+/// want of features, not of geometry: COLMAP's default mapper needs
+/// 15 verified inliers per pair (`TwoViewGeometry` `min_num_inliers`), and
+/// SIFT on a textured 480p frame finds thousands.
+const MIN_KEYPOINTS_PER_IMAGE: usize = 50;
 
 /// COLMAP's `TwoViewGeometry::ConfigurationType` values.
 const CALIBRATED: i64 = 2;
@@ -63,7 +75,14 @@ impl PairStats {
     /// The cause of a failed reconstruction these counts point to, if they
     /// point to one.
     pub fn cause(&self) -> Option<String> {
-        if self.verified == 0 {
+        if self.images > 0 && self.keypoints < MIN_KEYPOINTS_PER_IMAGE * self.images {
+            Some(format!(
+                "SIFT found {} features in {} images ({:.0} per image): the frames have too little texture, or the masks cover most of each frame",
+                self.keypoints,
+                self.images,
+                self.keypoints as f64 / self.images as f64
+            ))
+        } else if self.verified == 0 {
             Some(format!(
                 "no image pair passed geometric verification ({} pairs had raw matches): too few static features match",
                 self.matched
@@ -101,10 +120,17 @@ pub fn read_pair_stats(db: &Path) -> Result<PairStats> {
         .map_err(err)?
         .collect::<std::result::Result<Vec<_>, _>>()
         .map_err(err)?;
-    Ok(PairStats::from_rows(
-        usize::try_from(matched).unwrap_or(0),
-        rows,
-    ))
+    let (images, keypoints): (i64, Option<i64>) = conn
+        .query_row("SELECT COUNT(*), SUM(rows) FROM keypoints", [], |r| {
+            Ok((r.get(0)?, r.get(1)?))
+        })
+        .map_err(err)?;
+    let count = |n: i64| usize::try_from(n).unwrap_or(0);
+    Ok(PairStats {
+        images: count(images),
+        keypoints: count(keypoints.unwrap_or(0)),
+        ..PairStats::from_rows(count(matched), rows)
+    })
 }
 
 #[cfg(test)]
@@ -137,12 +163,35 @@ mod tests {
     }
 
     #[test]
+    fn too_few_keypoints_is_no_texture() {
+        // A flat grey video: SIFT finds nothing, so nothing matches.
+        let s = PairStats {
+            images: 14,
+            keypoints: 30,
+            ..PairStats::from_rows(0, vec![])
+        };
+        assert!(s.cause().is_some_and(|c| c.contains("too little texture")));
+        let textured = PairStats {
+            images: 14,
+            keypoints: 14 * 2000,
+            ..PairStats::from_rows(0, vec![])
+        };
+        assert!(
+            textured
+                .cause()
+                .is_some_and(|c| c.contains("too few static features"))
+        );
+    }
+
+    #[test]
     fn reads_a_colmap_shaped_database() {
         let dir = tempfile::tempdir().unwrap();
         let db = dir.path().join("database.db");
         let conn = rusqlite::Connection::open(&db).unwrap();
         conn.execute_batch(
-            "CREATE TABLE matches (pair_id INTEGER PRIMARY KEY, rows INTEGER, cols INTEGER, data BLOB);
+            "CREATE TABLE keypoints (image_id INTEGER PRIMARY KEY, rows INTEGER, cols INTEGER, data BLOB);
+             INSERT INTO keypoints VALUES (1, 900, 6, NULL), (2, 700, 6, NULL), (3, 800, 6, NULL);
+             CREATE TABLE matches (pair_id INTEGER PRIMARY KEY, rows INTEGER, cols INTEGER, data BLOB);
              CREATE TABLE two_view_geometries (pair_id INTEGER PRIMARY KEY, rows INTEGER, cols INTEGER, data BLOB, config INTEGER);
              INSERT INTO matches VALUES (1, 500, 2, NULL), (2, 400, 2, NULL), (3, 0, 2, NULL);
              INSERT INTO two_view_geometries VALUES (1, 450, 2, NULL, 5), (2, 380, 2, NULL, 6);",
@@ -156,7 +205,9 @@ mod tests {
                 matched: 2,
                 verified: 2,
                 general: 0,
-                homography: 2
+                homography: 2,
+                images: 3,
+                keypoints: 2400
             }
         );
         let e = read_pair_stats(&dir.path().join("missing.db")).unwrap_err();
