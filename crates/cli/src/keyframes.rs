@@ -1,9 +1,15 @@
-//! Keyframe selection for videos: drop blurry frames and near-duplicates
-//! before the pose and training stages.
+//! Keyframe selection for videos: drop frames without texture, blurry frames
+//! and near-duplicates before the pose and training stages.
 //!
 //! Every frame is read as grey and resized so its longer side is
 //! [`KeyframeOptions::long_side`] pixels.
 //!
+//! 0. **No texture.** A frame whose textured fraction
+//!    ([`romo::pipeline::texture_fraction`]: pixels whose gradient exceeds
+//!    about 2 grey levels per pixel) is below `min_texture` is dropped: a
+//!    black, white or flat frame (a fade, a covered lens) gives the pose
+//!    stage no features and the trainer a wrong picture. Such frames are
+//!    also left out of the blur test's neighbours.
 //! 1. **Blur.** Sharpness is the variance of the 4-neighbour Laplacian. A
 //!    frame is blurry when its sharpness is below `blur_ratio` × the median
 //!    sharpness of the frames within `blur_window` on either side: judged
@@ -39,6 +45,10 @@ pub struct KeyframeOptions {
     pub min_parallax: f64,
     /// Keep a frame at least every `max_gap` frames. Default 4.
     pub max_gap: usize,
+    /// Smallest textured fraction of a frame. Default 0.01, the mask
+    /// stage's `labels.min_texture_fraction`, below which a frame carries
+    /// no motion evidence either.
+    pub min_texture: f64,
 }
 
 impl Default for KeyframeOptions {
@@ -49,6 +59,7 @@ impl Default for KeyframeOptions {
             blur_window: 3,
             min_parallax: 0.01,
             max_gap: 4,
+            min_texture: 0.01,
         }
     }
 }
@@ -58,6 +69,7 @@ impl Default for KeyframeOptions {
 #[serde(rename_all = "snake_case", tag = "verdict")]
 pub enum Verdict {
     Kept,
+    Untextured { texture: f64 },
     Blurry { sharpness: f64, neighbours: f64 },
     Duplicate { parallax_px: f64 },
 }
@@ -71,14 +83,36 @@ pub struct Keyframes {
     pub verdicts: Vec<(String, Verdict)>,
 }
 
-impl Keyframes {
-    /// Frames dropped as blurry and as near-duplicates.
-    pub fn dropped(&self) -> (usize, usize) {
-        let count = |f: fn(&Verdict) -> bool| self.verdicts.iter().filter(|(_, v)| f(v)).count();
-        (
-            count(|v| matches!(v, Verdict::Blurry { .. })),
-            count(|v| matches!(v, Verdict::Duplicate { .. })),
+/// How many frames were dropped, by reason.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Default)]
+pub struct Dropped {
+    pub untextured: usize,
+    pub blurry: usize,
+    pub duplicates: usize,
+}
+
+impl std::fmt::Display for Dropped {
+    fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
+        if self.untextured > 0 {
+            write!(f, "{} without texture, ", self.untextured)?;
+        }
+        write!(
+            f,
+            "{} blurry, {} near-duplicates",
+            self.blurry, self.duplicates
         )
+    }
+}
+
+impl Keyframes {
+    /// Frames dropped, by reason.
+    pub fn dropped(&self) -> Dropped {
+        let count = |f: fn(&Verdict) -> bool| self.verdicts.iter().filter(|(_, v)| f(v)).count();
+        Dropped {
+            untextured: count(|v| matches!(v, Verdict::Untextured { .. })),
+            blurry: count(|v| matches!(v, Verdict::Blurry { .. })),
+            duplicates: count(|v| matches!(v, Verdict::Duplicate { .. })),
+        }
     }
 }
 
@@ -147,11 +181,28 @@ pub fn select(
         masks.len()
     );
     let sharp: Vec<f64> = frames.iter().map(laplacian_variance).collect();
-    let mut verdicts: Vec<Option<Verdict>> = vec![None; n];
+    let mut verdicts: Vec<Option<Verdict>> = frames
+        .iter()
+        .map(|f| {
+            let texture = f64::from(romo::pipeline::texture_fraction(f));
+            (texture < opts.min_texture).then_some(Verdict::Untextured { texture })
+        })
+        .collect();
+    anyhow::ensure!(
+        n == 0 || verdicts.iter().any(Option::is_none),
+        "none of the {n} frames has texture (under {:.0}% of each frame's pixels change by more than 2 grey levels: black, white or flat frames)",
+        opts.min_texture * 100.0
+    );
     for i in 0..n {
+        if verdicts[i].is_some() {
+            continue;
+        }
         let lo = i.saturating_sub(opts.blur_window);
         let hi = (i + opts.blur_window + 1).min(n);
-        let mut neigh: Vec<f64> = (lo..hi).filter(|&j| j != i).map(|j| sharp[j]).collect();
+        let mut neigh: Vec<f64> = (lo..hi)
+            .filter(|&j| j != i && !matches!(verdicts[j], Some(Verdict::Untextured { .. })))
+            .map(|j| sharp[j])
+            .collect();
         if neigh.is_empty() {
             continue;
         }
@@ -249,7 +300,7 @@ pub fn select_keyframes(
         };
         ms.push(m);
     }
-    select(names, &frames, &ms, opts)
+    select(names, &frames, &ms, opts).with_context(|| images.display().to_string())
 }
 
 /// Make `out/images/<name>` (and `out/masks/<name>.png`) links to the kept
@@ -363,6 +414,32 @@ mod tests {
         );
         // The last frame is always kept.
         assert_eq!(k.kept, ["a", "c"]);
+    }
+
+    #[test]
+    fn flat_frames_are_dropped_and_do_not_judge_blur() {
+        // A pan that fades to black: the black frames carry nothing, and the
+        // last sharp frame is not called blurry against them.
+        let mut frames: Vec<Plane> = (0..6).map(|i| frame(4.0 * i as f32)).collect();
+        frames.extend((0..4).map(|_| Plane::filled(160, 120, 0.0)));
+        let names: Vec<String> = (0..frames.len()).map(|i| format!("{i:05}.png")).collect();
+        let masks = vec![None; frames.len()];
+        let opts = KeyframeOptions {
+            max_gap: 10,
+            ..Default::default()
+        };
+        let k = select(&names, &frames, &masks, &opts).unwrap();
+        let d = k.dropped();
+        assert_eq!((d.untextured, d.blurry), (4, 0), "{:?}", k.verdicts);
+        assert_eq!(k.kept.len(), 6, "{:?}", k.verdicts);
+        assert_eq!(k.kept.last().map(String::as_str), Some("00005.png"));
+        // Nothing but black frames: one clear error.
+        let black = vec![Plane::filled(160, 120, 0.0); 3];
+        let e = select(&names[..3], &black, &masks[..3], &opts).unwrap_err();
+        assert!(
+            e.to_string().contains("none of the 3 frames has texture"),
+            "{e}"
+        );
     }
 
     #[test]

@@ -29,7 +29,7 @@ pub enum Stage {
     Frames,
     /// RoMo motion masks.
     Mask,
-    /// Video keyframes: blurry frames and near-duplicates dropped.
+    /// Video keyframes: frames without texture, blurry frames and near-duplicates dropped.
     Keyframes,
     /// Masked COLMAP.
     Pose,

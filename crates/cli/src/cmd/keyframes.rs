@@ -1,5 +1,5 @@
-//! `romosplat keyframes --scene DIR --out DIR`: drop blurry frames and
-//! near-duplicates of a video's frames (see `crate::keyframes`); `OUT/images`
+//! `romosplat keyframes --scene DIR --out DIR`: drop frames without texture,
+//! blurry frames and near-duplicates of a video's frames (see `crate::keyframes`); `OUT/images`
 //! and `OUT/masks` link the kept frames and their masks.
 
 use crate::Ctx;
@@ -45,11 +45,11 @@ pub fn run(args: &Args, ctx: &Ctx) -> anyhow::Result<serde_json::Value> {
     };
     let k = select_keyframes(&images, masks.as_deref(), &names, &opts)?;
     link_keyframes(&args.scene, &k.kept, &args.out)?;
-    let (blurry, dup) = k.dropped();
     ctx.info(format!(
-        "kept {} of {} frames ({blurry} blurry, {dup} near-duplicates dropped) → {}",
+        "kept {} of {} frames ({} dropped) → {}",
         k.kept.len(),
         names.len(),
+        k.dropped(),
         args.out.display()
     ));
     Ok(serde_json::to_value(&k)?)

@@ -48,7 +48,7 @@ pub enum Command {
     Export(export::Args),
     /// Extract a video's frames into a scene folder (`frames --video FILE --out DIR [--fps N]`).
     Frames(frames::Args),
-    /// Drop blurry and near-duplicate frames (`keyframes --scene DIR --out DIR`).
+    /// Drop untextured, blurry and near-duplicate frames (`keyframes --scene DIR --out DIR`).
     Keyframes(keyframes::Args),
     /// The time-budget plan of `run` for an input (`plan --video FILE [--budget-minutes 20]`).
     Plan(plan::Args),

@@ -318,6 +318,9 @@ impl MaskOutcome {
 pub struct KeyframesOutcome {
     pub kept: usize,
     pub frames: usize,
+    /// Black, white or flat frames.
+    #[serde(default)]
+    pub untextured: usize,
     pub blurry: usize,
     pub duplicates: usize,
 }
@@ -640,16 +643,17 @@ fn run_keyframes(p: &Plan, r: &mut Results, ctx: &Ctx) -> Result<serde_json::Val
     let masks = (!p.no_masks).then(|| p.masks());
     let k = select_keyframes(&p.images(), masks.as_deref(), &names, &opts)?;
     link_keyframes(&p.scene, &k.kept, &dir)?;
-    let (blurry, duplicates) = k.dropped();
+    let d = k.dropped();
     let outcome = KeyframesOutcome {
         kept: k.kept.len(),
         frames: names.len(),
-        blurry,
-        duplicates,
+        untextured: d.untextured,
+        blurry: d.blurry,
+        duplicates: d.duplicates,
     };
     ctx.info(format!(
-        "  kept {} of {} frames ({} blurry, {} near-duplicates dropped)",
-        outcome.kept, outcome.frames, outcome.blurry, outcome.duplicates
+        "  kept {} of {} frames ({d} dropped)",
+        outcome.kept, outcome.frames
     ));
     store(&mut r.keyframes, outcome)
 }

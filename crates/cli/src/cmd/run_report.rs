@@ -30,8 +30,14 @@ pub fn write_report(plan: &Plan, r: &Results) -> Result<()> {
         rows: vec![vec![
             match (&r.frames, &r.keyframes) {
                 (Some(f), Some(k)) => format!(
-                    "{} of {} kept ({} blurry, {} near-duplicates)",
-                    k.kept, f.frames, k.blurry, k.duplicates
+                    "{} of {} kept ({})",
+                    k.kept,
+                    f.frames,
+                    crate::keyframes::Dropped {
+                        untextured: k.untextured,
+                        blurry: k.blurry,
+                        duplicates: k.duplicates,
+                    }
                 ),
                 (Some(f), None) => f.frames.to_string(),
                 _ => "-".into(),
