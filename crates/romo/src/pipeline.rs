@@ -236,6 +236,10 @@ pub trait FrameSource: Sync {
     }
     /// Frame `i` as RGB in [0, 1].
     fn frame(&self, i: usize) -> Result<Rgb>;
+    /// What to call frame `i` in an error: its file where it has one.
+    fn describe(&self, i: usize) -> String {
+        format!("frame {i}")
+    }
 }
 
 impl FrameSource for [Rgb] {
@@ -429,9 +433,11 @@ fn load_frames(src: &dyn FrameSource, first: &Rgb, (fw, fh): (usize, usize)) -> 
             let f = src.frame(i)?;
             if f.w() != first.w() || f.h() != first.h() {
                 return Err(RomoError::Input(format!(
-                    "frame {i} is {}x{}, frame 0 is {}x{}: all frames must have one size",
+                    "{} is {}x{}, {} is {}x{}: RoMo needs every frame at one size (one camera's video or sequential capture); resize the images to one size, or do without masks (`--no-masks` in run, pose and train)",
+                    src.describe(i),
                     f.w(),
                     f.h(),
+                    src.describe(0),
                     first.w(),
                     first.h()
                 )));

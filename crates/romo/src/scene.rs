@@ -34,6 +34,11 @@ impl FrameSource for PathSource {
             .ok_or_else(|| RomoError::Input(format!("frame {i} out of range")))?;
         Ok(Rgb::from_image(&loader::io::read_rgb32f(p)?))
     }
+    fn describe(&self, i: usize) -> String {
+        self.paths
+            .get(i)
+            .map_or_else(|| format!("frame {i}"), |p| p.display().to_string())
+    }
 }
 
 /// A scene's video frames (indices into `scene.frames`).
@@ -49,6 +54,12 @@ impl FrameSource for SceneSource<'_> {
             .get(i)
             .ok_or_else(|| RomoError::Input(format!("frame {i} out of range")))?;
         Ok(Rgb::from_image(&self.0.load_image(k)?))
+    }
+    fn describe(&self, i: usize) -> String {
+        self.1
+            .get(i)
+            .and_then(|&k| self.0.frames.get(k))
+            .map_or_else(|| format!("frame {i}"), |f| f.image_path.display().to_string())
     }
 }
 

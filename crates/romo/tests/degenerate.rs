@@ -142,3 +142,41 @@ fn noise_frames_do_not_stop_the_stage() {
         assert!(r.frames[t].l_coverage > 0.3, "frame {t}: {:?}", r.frames[t]);
     }
 }
+
+#[test]
+fn frames_of_two_sizes_are_one_error_naming_both_files() {
+    // A photo folder with a portrait shot among landscape frames: the flow
+    // between frames needs one size, so the stage stops before any output.
+    let dir = tempfile::tempdir().unwrap();
+    let mut paths = vec![];
+    for (i, (w, h)) in [(W, H), (W, H), (H, W)].into_iter().enumerate() {
+        let p = dir.path().join(format!("{i:02}.png"));
+        image::RgbImage::from_fn(w as u32, h as u32, |x, y| {
+            let v = (255.0 * texture(x as f32, y as f32)) as u8;
+            image::Rgb([v, v, v])
+        })
+        .save(&p)
+        .unwrap();
+        paths.push(p);
+    }
+    let names: Vec<String> = (0..3).map(|i| format!("{i:02}.png")).collect();
+    let out = dir.path().join("out");
+    let e = romo::segment_paths(
+        &paths,
+        &names,
+        &out,
+        &romo::RomoOptions::default(),
+        &|_, _, _| {},
+    )
+    .unwrap_err()
+    .to_string();
+    assert!(
+        e.contains("02.png is 120x160") && e.contains("00.png is 160x120"),
+        "{e}"
+    );
+    assert!(
+        !out.join("masks").exists(),
+        "partial output in {}",
+        out.display()
+    );
+}
