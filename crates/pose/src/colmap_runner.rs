@@ -77,6 +77,9 @@ pub struct ColmapOptions {
     pub camera_model: CameraModel,
     /// One camera shared by every image (`--ImageReader.single_camera 1`),
     /// right for a video. Default true; set false for photo collections.
+    /// Images of more than one size get one camera each regardless (COLMAP
+    /// would skip every image whose size differs from the first), with a
+    /// note.
     pub single_camera: bool,
     /// Use `scene/masks` as `--ImageReader.mask_path`. Default true.
     pub use_masks: bool,
@@ -518,6 +521,22 @@ impl Runner<'_> {
     }
 }
 
+/// The distinct pixel sizes of `dir/<name>` over `names`, in order of first
+/// appearance (read from the file headers).
+fn distinct_sizes(dir: &Path, names: &[String]) -> Result<Vec<(u32, u32)>> {
+    let mut sizes: Vec<(u32, u32)> = Vec::new();
+    for n in names {
+        let p = dir.join(n);
+        let d = image::image_dimensions(&p).map_err(|e| {
+            PoseError::Invalid(format!("{}: cannot read the image size: {e}", p.display()))
+        })?;
+        if !sizes.contains(&d) {
+            sizes.push(d);
+        }
+    }
+    Ok(sizes)
+}
+
 /// Remove the database and its SQLite side files.
 fn remove_database(db: &Path) -> Result<()> {
     let mut side = db.as_os_str().to_os_string();
@@ -617,6 +636,18 @@ pub fn run_colmap_cancellable(
     let t0 = Instant::now();
     let version = colmap_version(&opts.colmap)?;
     let names = selected_images(paths, opts)?;
+    let sizes = distinct_sizes(&paths.images, &names)?;
+    let per_image = opts.single_camera && sizes.len() > 1;
+    let own;
+    let opts = if per_image {
+        own = ColmapOptions {
+            single_camera: false,
+            ..opts.clone()
+        };
+        &own
+    } else {
+        opts
+    };
     std::fs::create_dir_all(&paths.work).map_err(|e| PoseError::io(&paths.work, e))?;
     let db = paths.work.join("database.db");
     let state_path = paths.work.join("resume.json");
@@ -640,6 +671,22 @@ pub fn run_colmap_cancellable(
         work: paths.work.clone(),
         images: names.len() as u64,
     };
+    if per_image {
+        r.note(
+            "feature_extractor",
+            format!(
+                "the images have {} sizes ({}): one camera per image instead of one shared",
+                sizes.len(),
+                sizes
+                    .iter()
+                    .take(4)
+                    .map(|(w, h)| format!("{w}×{h}"))
+                    .collect::<Vec<_>>()
+                    .join(", ")
+                    + if sizes.len() > 4 { ", …" } else { "" }
+            ),
+        );
+    }
     let steps = Steps {
         paths,
         db,

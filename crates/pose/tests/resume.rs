@@ -151,7 +151,9 @@ fn failed_init_retries_once_then_says_why() {
     let scene = d.path().join("scene");
     std::fs::create_dir_all(scene.join("images")).unwrap();
     for n in ["a.png", "b.png", "c.png"] {
-        std::fs::write(scene.join("images").join(n), b"not decoded").unwrap();
+        image::GrayImage::new(8, 6)
+            .save(scene.join("images").join(n))
+            .unwrap();
     }
     let calls = d.path().join("mapper_calls");
     let colmap = d.path().join("colmap");
@@ -195,4 +197,53 @@ fn failed_init_retries_once_then_says_why() {
         .collect();
     let unique: std::collections::HashSet<&&str> = opts_given.iter().collect();
     assert_eq!(unique.len(), opts_given.len(), "{}", lines[1]);
+}
+
+#[test]
+fn images_of_several_sizes_get_one_camera_each() {
+    // A photo collection: COLMAP's shared camera would skip every image
+    // whose size differs from the first one's.
+    let d = tempfile::tempdir().unwrap();
+    let scene = d.path().join("scene");
+    std::fs::create_dir_all(scene.join("images")).unwrap();
+    for (n, (w, h)) in [("a.png", (8, 6)), ("b.png", (6, 8)), ("c.png", (8, 6))] {
+        image::GrayImage::new(w, h)
+            .save(scene.join("images").join(n))
+            .unwrap();
+    }
+    let calls = d.path().join("extractor_calls");
+    let colmap = d.path().join("colmap");
+    std::fs::write(
+        &colmap,
+        format!(
+            "#!/bin/sh\ncase \"$1\" in\n  -h) echo 'COLMAP 3.8 -- stand-in' ;;\n  feature_extractor) echo \"$@\" >> '{}' ;;\n  mapper) exit 1 ;;\n  *) exit 0 ;;\nesac\n",
+            calls.display()
+        ),
+    )
+    .unwrap();
+    #[cfg(unix)]
+    {
+        use std::os::unix::fs::PermissionsExt;
+        std::fs::set_permissions(&colmap, std::fs::Permissions::from_mode(0o755)).unwrap();
+    }
+    let opts = ColmapOptions {
+        colmap,
+        use_masks: false,
+        ..ColmapOptions::default()
+    };
+    assert!(opts.single_camera);
+    let mut notes = vec![];
+    let _ = run_colmap(&ColmapPaths::for_scene(&scene), &opts, &mut |p| {
+        if let Progress::Note { message, .. } = p {
+            notes.push(message);
+        }
+    });
+    let calls = std::fs::read_to_string(&calls).unwrap();
+    assert!(calls.contains("--ImageReader.single_camera 0"), "{calls}");
+    assert!(
+        notes
+            .iter()
+            .any(|n| n.contains("2 sizes (8×6, 6×8): one camera per image")),
+        "{notes:?}"
+    );
 }

@@ -59,7 +59,10 @@ impl FrameSource for SceneSource<'_> {
         self.1
             .get(i)
             .and_then(|&k| self.0.frames.get(k))
-            .map_or_else(|| format!("frame {i}"), |f| f.image_path.display().to_string())
+            .map_or_else(
+                || format!("frame {i}"),
+                |f| f.image_path.display().to_string(),
+            )
     }
 }
 
