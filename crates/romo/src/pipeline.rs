@@ -147,6 +147,13 @@ pub struct RomoOptions {
     /// Master seed (default 0; sub-stages derive theirs from it).
     #[cfg_attr(feature = "cli", arg(long, required = false))]
     pub seed: u64,
+    /// Longest run of frames segmented at once (default 500; 0: the whole
+    /// video). The stage holds about 11 MB per frame (flows, features,
+    /// the space–time cut), so a longer video is cut into runs of at most
+    /// this many frames, each sharing one frame with the next, each with
+    /// its own MLP ([`crate::scene`]): 500 frames need about 6 GB.
+    #[cfg_attr(feature = "cli", arg(long, required = false))]
+    pub chunk_frames: usize,
     /// Output folder for `masks/` etc. (default: the scene folder).
     #[cfg_attr(feature = "cli", arg(long))]
     pub out: Option<PathBuf>,
@@ -180,6 +187,7 @@ impl Default for RomoOptions {
             chromaticity_features: true,
             focal_ratio: None,
             seed: 0,
+            chunk_frames: 500,
             out: None,
             save_probabilities: false,
             overlays: false,
@@ -1166,10 +1174,7 @@ fn keep_frames_without_evidence(
     let np = fits.len();
     for (p, f) in fits.iter().enumerate() {
         if let Err(reason) = f {
-            report.warnings.push(format!(
-                "pair {p}–{} skipped: {reason}; its frames are labelled from their other neighbour",
-                p + 1
-            ));
+            report.warnings.push(skipped_pair_warning(p, reason));
             report.skipped_pairs.push(SkippedPair {
                 pair: p,
                 reason: reason.to_string(),
@@ -1188,16 +1193,27 @@ fn keep_frames_without_evidence(
         }
     }
     if !report.no_evidence_frames.is_empty() {
-        let list: Vec<String> = report
-            .no_evidence_frames
-            .iter()
-            .map(|t| t.to_string())
-            .collect();
-        report.warnings.push(format!(
-            "no evidence of motion in frame(s) {} (no usable pair on either side): kept whole",
-            list.join(", ")
-        ));
+        report
+            .warnings
+            .push(no_evidence_warning(&report.no_evidence_frames));
     }
+}
+
+/// The warning for skipped pair `p` (frames p, p+1).
+pub(crate) fn skipped_pair_warning(p: usize, reason: &dyn std::fmt::Display) -> String {
+    format!(
+        "pair {p}–{} skipped: {reason}; its frames are labelled from their other neighbour",
+        p + 1
+    )
+}
+
+/// The warning for frames without evidence.
+pub(crate) fn no_evidence_warning(frames: &[usize]) -> String {
+    let list: Vec<String> = frames.iter().map(|t| t.to_string()).collect();
+    format!(
+        "no evidence of motion in frame(s) {} (no usable pair on either side): kept whole",
+        list.join(", ")
+    )
 }
 
 /// Per-frame and per-pair diagnostics of the last round.

@@ -225,19 +225,167 @@ fn segment_source(
     }
     let fx = make_extractor(opts)?;
     let flow = make_flow(opts)?;
-    let seg = segment_frames(src, opts, flow.as_ref(), fx.as_ref(), progress)?;
-    let mut report = seg.report;
+    let masks_dir = out.join("masks");
+    let mut report: Option<RomoReport> = None;
+    for (k, (start, end)) in chunks(src.len(), opts.chunk_frames).into_iter().enumerate() {
+        let sub = Window {
+            src,
+            start,
+            len: end - start,
+        };
+        let seg = segment_frames(&sub, opts, flow.as_ref(), fx.as_ref(), progress)?;
+        // A window's first frame is the previous window's last, written there.
+        let first = usize::from(k > 0);
+        let t = Instant::now();
+        write_outputs(
+            &sub,
+            &seg.probs,
+            first,
+            &names[start..end],
+            sizes.map(|s| &s[start..end]),
+            out,
+            opts,
+            progress,
+        )?;
+        let mut part = seg.report;
+        part.timings_ms
+            .insert("refine_write".into(), t.elapsed().as_secs_f64() * 1e3);
+        report = Some(match report {
+            None => part,
+            Some(whole) => merge_window(whole, part, start),
+        });
+    }
+    let mut report = report.unwrap_or_default();
     for (f, n) in report.frames.iter_mut().zip(names) {
         f.name = n.clone();
     }
+    report.masks_dir = Some(masks_dir);
+    Ok(report)
+}
+
+/// Frames `start .. start + len` of `src`.
+struct Window<'a> {
+    src: &'a dyn FrameSource,
+    start: usize,
+    len: usize,
+}
+
+impl FrameSource for Window<'_> {
+    fn len(&self) -> usize {
+        self.len
+    }
+    fn frame(&self, i: usize) -> Result<Rgb> {
+        if i >= self.len {
+            return Err(RomoError::Input(format!("frame {i} out of range")));
+        }
+        self.src.frame(self.start + i)
+    }
+    fn describe(&self, i: usize) -> String {
+        self.src.describe(self.start + i)
+    }
+}
+
+/// The windows `[start, end)` that segment `n` frames at most `max` at a
+/// time (0: all at once): equal lengths, each sharing its first frame with
+/// the previous window's last, so every pair of consecutive frames lies in
+/// one window.
+pub fn chunks(n: usize, max: usize) -> Vec<(usize, usize)> {
+    if max < 2 || n <= max {
+        return vec![(0, n)];
+    }
+    let pairs = n - 1;
+    let count = pairs.div_ceil(max - 1);
+    let per = pairs.div_ceil(count);
+    (0..count)
+        .map(|k| (k * per, ((k + 1) * per + 1).min(n)))
+        .filter(|(s, e)| e > s)
+        .collect()
+}
+
+/// `whole` (frames `0 ..= start`) followed by `part` (frames `start ..`):
+/// frame `start` keeps `whole`'s entry; indices in `part` shift by `start`.
+fn merge_window(mut whole: RomoReport, part: RomoReport, start: usize) -> RomoReport {
+    // The part's warnings that name frames or pairs by its own indices;
+    // they are written again below with the video's.
+    let mut local: Vec<String> = part
+        .skipped_pairs
+        .iter()
+        .map(|sp| crate::pipeline::skipped_pair_warning(sp.pair, &sp.reason))
+        .collect();
+    if !part.no_evidence_frames.is_empty() {
+        local.push(crate::pipeline::no_evidence_warning(
+            &part.no_evidence_frames,
+        ));
+    }
+    whole
+        .frames
+        .extend(part.frames.into_iter().skip(1).map(|mut f| {
+            f.index += start;
+            f
+        }));
+    whole.dropped_frames.extend(
+        part.dropped_frames
+            .iter()
+            .filter(|&&t| t > 0)
+            .map(|t| t + start),
+    );
+    whole.rounds.extend(part.rounds);
+    whole.pairs.extend(part.pairs);
+    for (k, v) in part.timings_ms {
+        *whole.timings_ms.entry(k).or_insert(0.0) += v;
+    }
+    for sp in part.skipped_pairs {
+        let pair = sp.pair + start;
+        whole
+            .warnings
+            .push(crate::pipeline::skipped_pair_warning(pair, &sp.reason));
+        whole.skipped_pairs.push(crate::pipeline::SkippedPair {
+            pair,
+            reason: sp.reason,
+        });
+    }
+    let fresh: Vec<usize> = part
+        .no_evidence_frames
+        .iter()
+        .map(|t| t + start)
+        .filter(|t| !whole.no_evidence_frames.contains(t))
+        .collect();
+    if !fresh.is_empty() {
+        whole
+            .warnings
+            .push(crate::pipeline::no_evidence_warning(&fresh));
+        whole.no_evidence_frames.extend(fresh);
+    }
+    whole
+        .warnings
+        .extend(part.warnings.into_iter().filter(|w| !local.contains(w)));
+    if part.image_fixed_fraction > whole.image_fixed_fraction {
+        whole.image_fixed_fraction = part.image_fixed_fraction;
+        whole.image_fixed = part.image_fixed;
+    }
+    whole
+}
+
+/// Masks (and overlays, probabilities) of `src`'s frames `first ..` from
+/// their grid probabilities.
+#[allow(clippy::too_many_arguments)]
+fn write_outputs(
+    src: &dyn FrameSource,
+    probs: &[Plane],
+    first: usize,
+    names: &[String],
+    sizes: Option<&[(usize, usize)]>,
+    out: &Path,
+    opts: &RomoOptions,
+    progress: &dyn Fn(&str, usize, usize),
+) -> Result<()> {
     let masks_dir = out.join("masks");
     progress("write", 0, names.len());
-    let t = Instant::now();
-    (0..names.len())
+    (first..names.len())
         .into_par_iter()
         .try_for_each(|i| -> Result<()> {
             let frame = src.frame(i)?;
-            let prob = upsample_probability(&seg.probs[i], &frame, &opts.refine);
+            let prob = upsample_probability(&probs[i], &frame, &opts.refine);
             let sized = match sizes.and_then(|s| s.get(i)) {
                 Some(&(w, h)) if (w, h) != (prob.w, prob.h) => {
                     std::borrow::Cow::Owned(prob.resize(w, h))
@@ -266,12 +414,8 @@ fn segment_source(
             }
             Ok(())
         })?;
-    report
-        .timings_ms
-        .insert("refine_write".into(), t.elapsed().as_secs_f64() * 1e3);
     progress("write", names.len(), names.len());
-    report.masks_dir = Some(masks_dir);
-    Ok(report)
+    Ok(())
 }
 
 /// Frame darkened, with moving pixels tinted red.

@@ -180,3 +180,43 @@ fn frames_of_two_sizes_are_one_error_naming_both_files() {
         out.display()
     );
 }
+
+#[test]
+fn warnings_of_a_later_window_name_the_videos_frames() {
+    // 14 frames at most 8 at a time (windows 0–7, 7–13); frame 10 is black,
+    // so pairs 9–10 and 10–11 are skipped and frame 10 has no evidence.
+    let dir = tempfile::tempdir().unwrap();
+    let mut paths = vec![];
+    for t in 0..14 {
+        let f = if t == 10 { black() } else { frame(t) };
+        let p = dir.path().join(format!("{t:02}.png"));
+        image::RgbImage::from_fn(W as u32, H as u32, |x, y| {
+            let i = y as usize * W + x as usize;
+            image::Rgb([0, 1, 2].map(|k| (f.c[k].data[i] * 255.0).round() as u8))
+        })
+        .save(&p)
+        .unwrap();
+        paths.push(p);
+    }
+    let names: Vec<String> = (0..14).map(|t| format!("{t:02}.png")).collect();
+    let mut o = romo::RomoOptions::default();
+    o.labels.robust.iterations = 200;
+    o.chunk_frames = 8;
+    assert_eq!(romo::scene::chunks(14, 8), [(0, 8), (7, 14)]);
+    let r =
+        romo::segment_paths(&paths, &names, &dir.path().join("out"), &o, &|_, _, _| {}).unwrap();
+    assert_eq!(r.no_evidence_frames, [10]);
+    let pairs: Vec<usize> = r.skipped_pairs.iter().map(|p| p.pair).collect();
+    assert_eq!(pairs, [9, 10]);
+    let w = r.warnings.join("\n");
+    assert!(
+        w.contains("pair 9–10 skipped") && w.contains("pair 10–11 skipped"),
+        "{w}"
+    );
+    assert!(w.contains("no evidence of motion in frame(s) 10 "), "{w}");
+    assert!(!w.contains("frame(s) 3 ") && !w.contains("pair 2–3"), "{w}");
+    let m = image::open(dir.path().join("out/masks/10.png.png"))
+        .unwrap()
+        .to_luma8();
+    assert!(m.pixels().all(|p| p.0[0] == 255), "frame 10 kept whole");
+}

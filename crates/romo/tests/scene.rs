@@ -205,3 +205,47 @@ fn masks_of_a_downscaled_scene_have_the_images_size() {
         m.precision
     );
 }
+
+/// A video longer than `chunk_frames` is segmented in windows sharing one
+/// frame, each with its own MLP: every frame gets one mask, the report is
+/// indexed over the whole video, and J stays near the whole-video run's.
+#[test]
+fn a_video_longer_than_chunk_frames_is_segmented_in_windows() {
+    let (dir, scene) = generate("small.toml");
+    let (_, whole) = segment(dir.path(), &scene, romo::RomoOptions::default());
+    let windowed = romo::RomoOptions {
+        chunk_frames: 13,
+        ..Default::default()
+    };
+    // 24 frames, 23 pairs, at most 13 frames a window: 0–12, 12–23.
+    assert_eq!(romo::scene::chunks(24, 13), [(0, 13), (12, 24)]);
+    let (report, m) = segment(dir.path(), &scene, windowed);
+    let idx: Vec<usize> = report.frames.iter().map(|f| f.index).collect();
+    assert_eq!(idx, (0..24).collect::<Vec<_>>());
+    assert_eq!(report.frames[23].name, scene.frames[23].name);
+    assert_eq!(report.pairs.len(), 23);
+    assert_eq!(report.rounds.len(), 4, "two rounds per window");
+    eprintln!("J whole {:.3}, in windows {:.3}", whole.j_mean, m.j_mean);
+    assert!(
+        m.j_mean >= whole.j_mean - 0.1,
+        "J whole {}, in windows {}",
+        whole.j_mean,
+        m.j_mean
+    );
+}
+
+#[test]
+fn windows_cover_every_pair_once() {
+    for n in [2, 5, 6, 499, 500, 501, 1201, 3640] {
+        let w = romo::scene::chunks(n, 500);
+        assert_eq!(w.first().map(|c| c.0), Some(0));
+        assert_eq!(w.last().map(|c| c.1), Some(n));
+        for c in &w {
+            assert!(c.1 - c.0 <= 500 && c.1 - c.0 >= 2, "{n}: {w:?}");
+        }
+        for p in w.windows(2) {
+            assert_eq!(p[1].0 + 1, p[0].1, "{n}: {w:?}");
+        }
+    }
+    assert_eq!(romo::scene::chunks(3640, 0), [(0, 3640)]);
+}
