@@ -12,7 +12,10 @@
 //! [`Rates::measured`]).
 //!
 //! Order of choices:
-//! 1. masks: every frame, full resolution (RoMo needs consecutive frames);
+//! 1. masks: every frame, full resolution (RoMo needs consecutive frames),
+//!    unless a video's masks alone would take over [`MASK_SHARE`] of the
+//!    budget: then every k-th frame is extracted (the smallest k that fits;
+//!    a long video, where dropping frames costs less than the budget);
 //! 2. COLMAP: the best of COLMAP's quality tiers (automatic_reconstructor's
 //!    medium / low, then smaller) whose estimate fits [`POSE_SHARE`] of the
 //!    budget; if even the smallest does not, a frame stride;
@@ -32,6 +35,9 @@ use std::path::{Path, PathBuf};
 
 /// Share of the budget COLMAP may take.
 pub const POSE_SHARE: f64 = 0.30;
+/// Share of the budget the mask stage may take before a video's frames are
+/// subsampled at extraction.
+pub const MASK_SHARE: f64 = 0.35;
 /// Steps the planner aims for before it trades resolution for them.
 pub const TARGET_STEPS: usize = 3000;
 /// INRIA's first evaluation checkpoint; more is not planned on a CPU budget.
@@ -194,6 +200,10 @@ pub struct Input {
     pub trainings: usize,
     /// The RoMo mask stage runs (false under `--no-masks`).
     pub masks: bool,
+    /// A video's frame rate when the planner may extract fewer frames
+    /// (`None`: a scene folder, or `--fps` given).
+    #[serde(skip_serializing_if = "Option::is_none")]
+    pub fps: Option<f64>,
 }
 
 /// Values the user set; `None` = plan it.
@@ -210,7 +220,14 @@ pub struct Fixed {
 #[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
 pub struct Plan {
     pub budget_s: f64,
+    /// Frames the stages see (after `frame_step`).
     pub frames: usize,
+    /// Every `frame_step`-th video frame is extracted (1: all).
+    #[serde(default = "one")]
+    pub frame_step: usize,
+    /// The extraction frame rate that gives it (`None`: the video's own).
+    #[serde(default)]
+    pub extract_fps: Option<f64>,
     pub pose_stride: usize,
     pub pose_max_image_size: u32,
     pub pose_features: u32,
@@ -261,7 +278,15 @@ impl Plan {
         let m = |s: f64| format!("≈ {:.1} min", s / 60.0);
         let posed = self.frames.div_ceil(self.pose_stride);
         vec![
-            if self.masks {
+            if self.masks && self.frame_step > 1 {
+                format!(
+                    "masks: {} frames (every {}th of the video's, extracted at {:.2} fps), {}",
+                    self.frames,
+                    self.frame_step,
+                    self.extract_fps.unwrap_or(0.0),
+                    m(self.mask_s)
+                )
+            } else if self.masks {
                 format!("masks: {} frames, {}", self.frames, m(self.mask_s))
             } else {
                 "masks: none (--no-masks)".into()
@@ -335,8 +360,26 @@ fn scaled(v: u32, d: u32) -> u32 {
 
 /// Plan for `input` within `budget_s` seconds. Pure.
 pub fn plan(input: &Input, rates: &Rates, budget_s: f64, fixed: &Fixed) -> Plan {
+    let per_frame = f64::from(input.width) * f64::from(input.height) * rates.mask_s_per_px;
+    // A long video: every k-th frame, the smallest k whose masks fit.
+    let mut frame_step = 1;
+    if input.masks && input.fps.is_some_and(|f| f > 0.0) {
+        while input.frames.div_ceil(frame_step) > 2
+            && input.frames.div_ceil(frame_step) as f64 * per_frame > MASK_SHARE * budget_s
+        {
+            frame_step += 1;
+        }
+    }
+    let extract_fps = input
+        .fps
+        .filter(|_| frame_step > 1)
+        .map(|f| f / frame_step as f64);
+    let input = &Input {
+        frames: input.frames.div_ceil(frame_step),
+        ..*input
+    };
     let mask_s = if input.masks {
-        input.frames as f64 * f64::from(input.width) * f64::from(input.height) * rates.mask_s_per_px
+        input.frames as f64 * per_frame
     } else {
         0.0
     };
@@ -423,6 +466,8 @@ pub fn plan(input: &Input, rates: &Rates, budget_s: f64, fixed: &Fixed) -> Plan 
     Plan {
         budget_s,
         frames: input.frames,
+        frame_step,
+        extract_fps,
         pose_stride,
         pose_max_image_size,
         pose_features,
@@ -590,6 +635,7 @@ mod tests {
             overlap: 10,
             trainings: 2,
             masks: true,
+            fps: Some(30.0),
         }
     }
 
@@ -790,5 +836,57 @@ mod tests {
         let p = plan(&long, &rates(), 1200.0, &Fixed::default());
         assert!(p.pose_stride > 1, "{p:?}");
         assert!(p.pose_s <= POSE_SHARE * 1200.0, "{p:?}");
+    }
+}
+
+#[cfg(test)]
+mod frame_step_tests {
+    use super::*;
+
+    fn long(frames: usize, fps: Option<f64>) -> Input {
+        Input {
+            frames,
+            width: 854,
+            height: 480,
+            overlap: 10,
+            trainings: 2,
+            masks: true,
+            fps,
+        }
+    }
+
+    #[test]
+    fn a_long_video_is_extracted_at_a_lower_rate_so_its_masks_fit() {
+        // 0.40 s a frame at factor 1: 3640 frames would take 24 minutes.
+        let rates = Rates::measured(0.05, 0.5e-6, 1.0);
+        let p = plan(&long(3640, Some(30.0)), &rates, 1200.0, &Fixed::default());
+        assert!(p.frame_step > 1, "{p:?}");
+        assert!(p.mask_s <= MASK_SHARE * 1200.0 + 1e-9, "{p:?}");
+        assert_eq!(p.frames, 3640usize.div_ceil(p.frame_step));
+        let fps = p.extract_fps.unwrap();
+        assert!((fps - 30.0 / p.frame_step as f64).abs() < 1e-9);
+        // The smallest step that fits.
+        let one_less = 3640usize.div_ceil(p.frame_step - 1) as f64 * 854.0 * 480.0;
+        assert!(one_less * rates.mask_s_per_px > MASK_SHARE * 1200.0);
+        assert!(p.lines()[0].contains(&format!("every {}th", p.frame_step)));
+        // The planned frame count is what COLMAP's stride divides.
+        assert!(p.pose_s <= POSE_SHARE * 1200.0 + 1e-9, "{p:?}");
+    }
+
+    #[test]
+    fn short_videos_scenes_and_set_rates_keep_every_frame() {
+        let rates = Rates::measured(0.05, 0.5e-6, 1.0);
+        for input in [
+            long(65, Some(30.0)),
+            long(3640, None),
+            Input {
+                masks: false,
+                ..long(3640, Some(30.0))
+            },
+        ] {
+            let p = plan(&input, &rates, 1200.0, &Fixed::default());
+            assert_eq!((p.frame_step, p.extract_fps), (1, None), "{input:?}");
+            assert_eq!(p.frames, input.frames);
+        }
     }
 }

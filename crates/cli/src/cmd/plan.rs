@@ -69,6 +69,7 @@ pub fn plan_for(
 /// Run `romosplat plan`.
 pub fn run(args: &Args, ctx: &Ctx) -> anyhow::Result<serde_json::Value> {
     let (frames, w, h) = args.input.probe(std::path::Path::new("ffmpeg"), None)?;
+    let fps = args.input.video_fps(std::path::Path::new("ffmpeg"))?;
     let mut colmap = pose::ColmapOptions::default();
     args.pose.apply(&mut colmap)?;
     let fixed = Fixed {
@@ -85,6 +86,7 @@ pub fn run(args: &Args, ctx: &Ctx) -> anyhow::Result<serde_json::Value> {
         overlap: colmap.overlap,
         trainings: if args.no_baseline { 1 } else { 2 },
         masks: true,
+        fps,
     };
     let p = plan_for(&input, args.budget_minutes, &fixed, args.backend, ctx)?;
     ctx.info(format!("plan for {frames} frames of {w}×{h}:"));

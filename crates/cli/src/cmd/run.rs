@@ -57,6 +57,15 @@ impl InputArgs {
             Source::Scene(s) => crate::plan::probe_scene(&s),
         }
     }
+
+    /// A video's average frame rate (`None` for a scene folder, or when the
+    /// container does not say).
+    pub fn video_fps(&self, ffmpeg: &Path) -> Result<Option<f64>> {
+        match self.source()? {
+            Source::Video(v) => Ok(crate::plan::probe_video(ffmpeg, &v)?.fps),
+            Source::Scene(_) => Ok(None),
+        }
+    }
 }
 
 /// `romosplat run`
@@ -202,7 +211,7 @@ impl Plan {
             out: args.out.clone(),
             scene: args.out.join("scene"),
             source,
-            fps: args.fps,
+            fps: args.fps.or(budget.extract_fps),
             ffmpeg: args.ffmpeg.clone(),
             keep_poses: args.keep_poses,
             no_masks: args.no_masks,
@@ -674,6 +683,12 @@ fn budget(args: &Args, ctx: &Ctx) -> Result<Budget> {
             .unwrap_or(pose::ColmapOptions::default().overlap),
         trainings: trainings(args),
         masks: !args.no_masks,
+        // `--fps` is the user's choice of frames; without it a long video
+        // may be extracted at a lower rate.
+        fps: match args.fps {
+            Some(_) => None,
+            None => args.input.video_fps(&args.ffmpeg)?,
+        },
     };
     let fixed = crate::plan::Fixed {
         steps: args.steps.map(|s| s as usize),
