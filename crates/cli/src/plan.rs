@@ -255,6 +255,18 @@ pub struct Plan {
     pub cpu_factor: f64,
 }
 
+/// 2 → "2nd", 3 → "3rd", 11 → "11th", 21 → "21st".
+fn ordinal(n: usize) -> String {
+    let suffix = match (n % 10, n % 100) {
+        (_, 11..=13) => "th",
+        (1, _) => "st",
+        (2, _) => "nd",
+        (3, _) => "rd",
+        _ => "th",
+    };
+    format!("{n}{suffix}")
+}
+
 fn one_f64() -> f64 {
     1.0
 }
@@ -280,9 +292,9 @@ impl Plan {
         vec![
             if self.masks && self.frame_step > 1 {
                 format!(
-                    "masks: {} frames (every {}th of the video's, extracted at {:.2} fps), {}",
+                    "masks: {} frames (every {} of the video's, extracted at {:.2} fps), {}",
                     self.frames,
-                    self.frame_step,
+                    ordinal(self.frame_step),
                     self.extract_fps.unwrap_or(0.0),
                     m(self.mask_s)
                 )
@@ -868,7 +880,17 @@ mod frame_step_tests {
         // The smallest step that fits.
         let one_less = 3640usize.div_ceil(p.frame_step - 1) as f64 * 854.0 * 480.0;
         assert!(one_less * rates.mask_s_per_px > MASK_SHARE * 1200.0);
-        assert!(p.lines()[0].contains(&format!("every {}th", p.frame_step)));
+        assert!(
+            p.lines()[0].contains(&format!("every {} of", ordinal(p.frame_step))),
+            "{:?}",
+            p.lines()
+        );
+        assert_eq!(
+            [1, 2, 3, 4, 11, 12, 13, 21, 22, 101].map(ordinal),
+            [
+                "1st", "2nd", "3rd", "4th", "11th", "12th", "13th", "21st", "22nd", "101st"
+            ]
+        );
         // The planned frame count is what COLMAP's stride divides.
         assert!(p.pose_s <= POSE_SHARE * 1200.0 + 1e-9, "{p:?}");
     }
