@@ -38,6 +38,39 @@ fn small_frames(dir: &Path, n: usize) -> PathBuf {
     scene
 }
 
+/// `dir/scene/images/{a,b,c,…}.png`, black, of the given sizes.
+fn grey_images(dir: &Path, sizes: &[(u32, u32)]) -> PathBuf {
+    let scene = dir.join("scene");
+    std::fs::create_dir_all(scene.join("images")).unwrap();
+    for (i, &(w, h)) in sizes.iter().enumerate() {
+        let name = format!("{}.png", char::from(b'a' + i as u8));
+        image::GrayImage::new(w, h)
+            .save(scene.join("images").join(name))
+            .unwrap();
+    }
+    scene
+}
+
+/// `dir/colmap`: a stand-in shell script that says it is COLMAP 3.8, runs
+/// the `case` arms in `arms` (e.g. `mapper) exit 1 ;;`) and succeeds at
+/// every other step.
+fn stand_in_colmap(dir: &Path, arms: &str) -> PathBuf {
+    let colmap = dir.join("colmap");
+    std::fs::write(
+        &colmap,
+        format!(
+            "#!/bin/sh\ncase \"$1\" in\n  -h) echo 'COLMAP 3.8 -- stand-in' ;;\n  {arms}\n  *) exit 0 ;;\nesac\n"
+        ),
+    )
+    .unwrap();
+    #[cfg(unix)]
+    {
+        use std::os::unix::fs::PermissionsExt;
+        std::fs::set_permissions(&colmap, std::fs::Permissions::from_mode(0o755)).unwrap();
+    }
+    colmap
+}
+
 fn log(work: &Path, step: &str) -> String {
     std::fs::read_to_string(work.join(format!("{step}.log"))).unwrap()
 }
@@ -148,28 +181,15 @@ fn interrupted_run_resumes() {
 #[test]
 fn failed_init_retries_once_then_says_why() {
     let d = tempfile::tempdir().unwrap();
-    let scene = d.path().join("scene");
-    std::fs::create_dir_all(scene.join("images")).unwrap();
-    for n in ["a.png", "b.png", "c.png"] {
-        image::GrayImage::new(8, 6)
-            .save(scene.join("images").join(n))
-            .unwrap();
-    }
+    let scene = grey_images(d.path(), &[(8, 6); 3]);
     let calls = d.path().join("mapper_calls");
-    let colmap = d.path().join("colmap");
-    std::fs::write(
-        &colmap,
-        format!(
-            "#!/bin/sh\ncase \"$1\" in\n  -h) echo 'COLMAP 3.8 -- stand-in' ;;\n  mapper) echo \"$@\" >> '{}'; echo 'Finding good initial image pair'; echo '  => No good initial image pair found.'; exit 1 ;;\n  *) exit 0 ;;\nesac\n",
+    let colmap = stand_in_colmap(
+        d.path(),
+        &format!(
+            "mapper) echo \"$@\" >> '{}'; echo 'Finding good initial image pair'; echo '  => No good initial image pair found.'; exit 1 ;;",
             calls.display()
         ),
-    )
-    .unwrap();
-    #[cfg(unix)]
-    {
-        use std::os::unix::fs::PermissionsExt;
-        std::fs::set_permissions(&colmap, std::fs::Permissions::from_mode(0o755)).unwrap();
-    }
+    );
     let opts = ColmapOptions {
         colmap: colmap.clone(),
         use_masks: false,
@@ -204,28 +224,15 @@ fn images_of_several_sizes_get_one_camera_each() {
     // A photo collection: COLMAP's shared camera would skip every image
     // whose size differs from the first one's.
     let d = tempfile::tempdir().unwrap();
-    let scene = d.path().join("scene");
-    std::fs::create_dir_all(scene.join("images")).unwrap();
-    for (n, (w, h)) in [("a.png", (8, 6)), ("b.png", (6, 8)), ("c.png", (8, 6))] {
-        image::GrayImage::new(w, h)
-            .save(scene.join("images").join(n))
-            .unwrap();
-    }
+    let scene = grey_images(d.path(), &[(8, 6), (6, 8), (8, 6)]);
     let calls = d.path().join("extractor_calls");
-    let colmap = d.path().join("colmap");
-    std::fs::write(
-        &colmap,
-        format!(
-            "#!/bin/sh\ncase \"$1\" in\n  -h) echo 'COLMAP 3.8 -- stand-in' ;;\n  feature_extractor) echo \"$@\" >> '{}' ;;\n  mapper) exit 1 ;;\n  *) exit 0 ;;\nesac\n",
+    let colmap = stand_in_colmap(
+        d.path(),
+        &format!(
+            "feature_extractor) echo \"$@\" >> '{}' ;;\n  mapper) exit 1 ;;",
             calls.display()
         ),
-    )
-    .unwrap();
-    #[cfg(unix)]
-    {
-        use std::os::unix::fs::PermissionsExt;
-        std::fs::set_permissions(&colmap, std::fs::Permissions::from_mode(0o755)).unwrap();
-    }
+    );
     let opts = ColmapOptions {
         colmap,
         use_masks: false,
