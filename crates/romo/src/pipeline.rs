@@ -151,7 +151,9 @@ pub struct RomoOptions {
     /// video). The stage holds about 11 MB per frame (flows, features,
     /// the space–time cut), so a longer video is cut into runs of at most
     /// this many frames, each sharing one frame with the next, each with
-    /// its own MLP (`romo::scene::chunks`): 500 frames need about 6 GB.
+    /// its own MLP (`romo::scene::chunks`): 500 frames need about 6 GB. The
+    /// shared frame keeps the earlier window's mask, made from its backward
+    /// pair only; progress restarts with each window.
     #[cfg_attr(feature = "cli", arg(long, required = false))]
     pub chunk_frames: usize,
     /// Output folder for `masks/` etc. (default: the scene folder).
