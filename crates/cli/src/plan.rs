@@ -53,7 +53,10 @@ pub struct Rates {
     /// Training: seconds per step = `train_step_s + train_s_per_px · pixels`.
     pub train_step_s: f64,
     pub train_s_per_px: f64,
-    /// RoMo mask stage, seconds per frame pixel.
+    /// RoMo mask stage, seconds per frame = `mask_s_per_frame +
+    /// mask_s_per_px · pixels`: most of it runs on the fixed working grid,
+    /// the rest (decoding, the guided filter, writing) at full resolution.
+    pub mask_s_per_frame: f64,
     pub mask_s_per_px: f64,
     /// COLMAP SIFT extraction, seconds per pixel at the SIFT size.
     pub sift_s_per_px: f64,
@@ -77,12 +80,15 @@ impl Rates {
     /// CPU's [`probe_cpu_factor`]), with the training terms given by a probe
     /// of the adapter. The mask stage took 0.155 s a 854×480 frame over a
     /// 650-frame video where the probe ran at 0.39 (`romosplat mask` on
-    /// `lady-running.mp4` looped ten times, 101 s): 0.40 s in those units.
+    /// `lady-running.mp4` looped ten times, 101 s) and 0.384 s a 3840×2160
+    /// frame (the 65 frames upscaled, 25 s, probe at 0.36): in those units
+    /// 0.37 s a frame plus 0.078 s a megapixel.
     pub fn measured(train_step_s: f64, train_s_per_px: f64, cpu_factor: f64) -> Self {
         Rates {
             train_step_s,
             train_s_per_px,
-            mask_s_per_px: cpu_factor * 0.40 / (854.0 * 480.0),
+            mask_s_per_frame: cpu_factor * 0.37,
+            mask_s_per_px: cpu_factor * 0.078e-6,
             sift_s_per_px: cpu_factor * 2.2 / (854.0 * 480.0),
             match_s_per_pair_feature: cpu_factor * 0.6 / 4096.0,
             mapper_s_per_image_kfeature: cpu_factor * 0.5,
@@ -372,7 +378,8 @@ fn scaled(v: u32, d: u32) -> u32 {
 
 /// Plan for `input` within `budget_s` seconds. Pure.
 pub fn plan(input: &Input, rates: &Rates, budget_s: f64, fixed: &Fixed) -> Plan {
-    let per_frame = f64::from(input.width) * f64::from(input.height) * rates.mask_s_per_px;
+    let per_frame = rates.mask_s_per_frame
+        + f64::from(input.width) * f64::from(input.height) * rates.mask_s_per_px;
     // A long video: every k-th frame, the smallest k whose masks fit.
     let mut frame_step = 1;
     if input.masks && input.fps.is_some_and(|f| f > 0.0) {
@@ -869,7 +876,7 @@ mod frame_step_tests {
 
     #[test]
     fn a_long_video_is_extracted_at_a_lower_rate_so_its_masks_fit() {
-        // 0.40 s a frame at factor 1: 3640 frames would take 24 minutes.
+        // 0.40 s a 854×480 frame at factor 1: 3640 frames would take 24 minutes.
         let rates = Rates::measured(0.05, 0.5e-6, 1.0);
         let p = plan(&long(3640, Some(30.0)), &rates, 1200.0, &Fixed::default());
         assert!(p.frame_step > 1, "{p:?}");
@@ -878,8 +885,9 @@ mod frame_step_tests {
         let fps = p.extract_fps.unwrap();
         assert!((fps - 30.0 / p.frame_step as f64).abs() < 1e-9);
         // The smallest step that fits.
-        let one_less = 3640usize.div_ceil(p.frame_step - 1) as f64 * 854.0 * 480.0;
-        assert!(one_less * rates.mask_s_per_px > MASK_SHARE * 1200.0);
+        let per_frame = rates.mask_s_per_frame + 854.0 * 480.0 * rates.mask_s_per_px;
+        let one_less = 3640usize.div_ceil(p.frame_step - 1) as f64 * per_frame;
+        assert!(one_less > MASK_SHARE * 1200.0);
         assert!(
             p.lines()[0].contains(&format!("every {} of", ordinal(p.frame_step))),
             "{:?}",
@@ -893,6 +901,29 @@ mod frame_step_tests {
         );
         // The planned frame count is what COLMAP's stride divides.
         assert!(p.pose_s <= POSE_SHARE * 1200.0 + 1e-9, "{p:?}");
+    }
+
+    #[test]
+    fn the_mask_rate_reproduces_its_two_measurements() {
+        // 0.155 s a 854×480 frame with the probe at 0.39, 0.384 s a
+        // 3840×2160 frame at 0.36 (`Rates::measured`).
+        let per_frame = |factor: f64, w: u32, h: u32| {
+            let p = plan(
+                &Input {
+                    frames: 100,
+                    width: w,
+                    height: h,
+                    fps: None,
+                    ..long(100, None)
+                },
+                &Rates::measured(0.05, 0.5e-6, factor),
+                1e6,
+                &Fixed::default(),
+            );
+            p.mask_s / 100.0
+        };
+        assert!((per_frame(0.39, 854, 480) - 0.155).abs() < 0.01);
+        assert!((per_frame(0.36, 3840, 2160) - 0.384).abs() < 0.02);
     }
 
     #[test]
