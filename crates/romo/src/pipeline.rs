@@ -892,8 +892,16 @@ pub fn segment_frames(
 ) -> Result<Segmentation> {
     o.validate()?;
     let n = src.len();
-    if n < 2 {
-        return Err(RomoError::Input(format!("need at least 2 frames, got {n}")));
+    if n == 0 {
+        return Err(RomoError::Input(
+            "no frames: RoMo needs at least 2 (a video or a photo sequence)".into(),
+        ));
+    }
+    if n == 1 {
+        return Err(RomoError::Input(format!(
+            "{} is the only frame: RoMo needs at least 2 (a video or a photo sequence)",
+            src.describe(0)
+        )));
     }
     let mut report = RomoReport {
         backends: vec![flow.name().to_string(), fx.name().to_string()],

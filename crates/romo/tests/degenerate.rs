@@ -220,3 +220,25 @@ fn warnings_of_a_later_window_name_the_videos_frames() {
         .to_luma8();
     assert!(m.pixels().all(|p| p.0[0] == 255), "frame 10 kept whole");
 }
+
+#[test]
+fn one_frame_is_one_error_naming_it() {
+    let dir = tempfile::tempdir().unwrap();
+    let p = dir.path().join("only.png");
+    image::RgbImage::new(W as u32, H as u32).save(&p).unwrap();
+    let o = romo::RomoOptions::default();
+    let e = romo::segment_paths(
+        std::slice::from_ref(&p),
+        &["only.png".to_string()],
+        &dir.path().join("out"),
+        &o,
+        &|_, _, _| {},
+    )
+    .unwrap_err()
+    .to_string();
+    assert!(e.contains("only.png is the only frame"), "{e}");
+    let e = romo::segment_paths(&[], &[], &dir.path().join("out"), &o, &|_, _, _| {})
+        .unwrap_err()
+        .to_string();
+    assert!(e.contains("no frames"), "{e}");
+}
