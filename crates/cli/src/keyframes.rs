@@ -84,8 +84,10 @@ pub struct Keyframes {
 }
 
 /// How many frames were dropped, by reason.
-#[derive(Debug, Clone, Copy, PartialEq, Eq, Default)]
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Default, serde::Serialize, serde::Deserialize)]
 pub struct Dropped {
+    /// Black, white or flat frames.
+    #[serde(default)]
     pub untextured: usize,
     pub blurry: usize,
     pub duplicates: usize,

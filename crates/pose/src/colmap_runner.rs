@@ -636,8 +636,13 @@ pub fn run_colmap_cancellable(
     let t0 = Instant::now();
     let version = colmap_version(&opts.colmap)?;
     let names = selected_images(paths, opts)?;
-    let sizes = distinct_sizes(&paths.images, &names)?;
-    let per_image = opts.single_camera && sizes.len() > 1;
+    // Only a shared camera needs one size.
+    let sizes = if opts.single_camera {
+        distinct_sizes(&paths.images, &names)?
+    } else {
+        Vec::new()
+    };
+    let per_image = sizes.len() > 1;
     let own;
     let opts = if per_image {
         own = ColmapOptions {

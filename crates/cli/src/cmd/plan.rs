@@ -68,8 +68,7 @@ pub fn plan_for(
 
 /// Run `romosplat plan`.
 pub fn run(args: &Args, ctx: &Ctx) -> anyhow::Result<serde_json::Value> {
-    let (frames, w, h) = args.input.probe(std::path::Path::new("ffmpeg"), None)?;
-    let fps = args.input.video_fps(std::path::Path::new("ffmpeg"))?;
+    let (frames, w, h, fps) = args.input.probe(std::path::Path::new("ffmpeg"), None)?;
     let mut colmap = pose::ColmapOptions::default();
     args.pose.apply(&mut colmap)?;
     let fixed = Fixed {

@@ -47,23 +47,20 @@ impl InputArgs {
     }
 
     /// Frame count and size of the input: the video's (probed with the
-    /// ffprobe beside `ffmpeg`, at `fps` when given) or the scene's images.
-    pub fn probe(&self, ffmpeg: &Path, fps: Option<f64>) -> Result<(usize, u32, u32)> {
+    /// ffprobe beside `ffmpeg`, at `fps` when given) or the scene's images;
+    /// and, for a video without `fps`, its own frame rate, which the planner
+    /// may lower (`--fps` is the user's choice of frames).
+    pub fn probe(&self, ffmpeg: &Path, fps: Option<f64>) -> Result<(usize, u32, u32, Option<f64>)> {
         match self.source()? {
             Source::Video(v) => {
                 let info = crate::plan::probe_video(ffmpeg, &v)?;
-                Ok((info.frames_at(fps), info.width, info.height))
+                let own = info.fps.filter(|_| fps.is_none());
+                Ok((info.frames_at(fps), info.width, info.height, own))
             }
-            Source::Scene(s) => crate::plan::probe_scene(&s),
-        }
-    }
-
-    /// A video's average frame rate (`None` for a scene folder, or when the
-    /// container does not say).
-    pub fn video_fps(&self, ffmpeg: &Path) -> Result<Option<f64>> {
-        match self.source()? {
-            Source::Video(v) => Ok(crate::plan::probe_video(ffmpeg, &v)?.fps),
-            Source::Scene(_) => Ok(None),
+            Source::Scene(s) => {
+                let (n, w, h) = crate::plan::probe_scene(&s)?;
+                Ok((n, w, h, None))
+            }
         }
     }
 }
@@ -327,11 +324,8 @@ impl MaskOutcome {
 pub struct KeyframesOutcome {
     pub kept: usize,
     pub frames: usize,
-    /// Black, white or flat frames.
-    #[serde(default)]
-    pub untextured: usize,
-    pub blurry: usize,
-    pub duplicates: usize,
+    #[serde(flatten)]
+    pub dropped: crate::keyframes::Dropped,
 }
 
 /// The typed results of the stages (run now, or restored from their manifests).
@@ -652,17 +646,14 @@ fn run_keyframes(p: &Plan, r: &mut Results, ctx: &Ctx) -> Result<serde_json::Val
     let masks = (!p.no_masks).then(|| p.masks());
     let k = select_keyframes(&p.images(), masks.as_deref(), &names, &opts)?;
     link_keyframes(&p.scene, &k.kept, &dir)?;
-    let d = k.dropped();
     let outcome = KeyframesOutcome {
         kept: k.kept.len(),
         frames: names.len(),
-        untextured: d.untextured,
-        blurry: d.blurry,
-        duplicates: d.duplicates,
+        dropped: k.dropped(),
     };
     ctx.info(format!(
-        "  kept {} of {} frames ({d} dropped)",
-        outcome.kept, outcome.frames
+        "  kept {} of {} frames ({} dropped)",
+        outcome.kept, outcome.frames, outcome.dropped
     ));
     store(&mut r.keyframes, outcome)
 }
@@ -672,7 +663,7 @@ fn run_keyframes(p: &Plan, r: &mut Results, ctx: &Ctx) -> Result<serde_json::Val
 /// reused while those stay the same: a rerun neither probes the adapter
 /// again nor sees a slightly different probe change its stages' options.
 fn budget(args: &Args, ctx: &Ctx) -> Result<Budget> {
-    let (frames, width, height) = args.input.probe(&args.ffmpeg, args.fps)?;
+    let (frames, width, height, fps) = args.input.probe(&args.ffmpeg, args.fps)?;
     let input = crate::plan::Input {
         frames,
         width,
@@ -683,12 +674,7 @@ fn budget(args: &Args, ctx: &Ctx) -> Result<Budget> {
             .unwrap_or(pose::ColmapOptions::default().overlap),
         trainings: trainings(args),
         masks: !args.no_masks,
-        // `--fps` is the user's choice of frames; without it a long video
-        // may be extracted at a lower rate.
-        fps: match args.fps {
-            Some(_) => None,
-            None => args.input.video_fps(&args.ffmpeg)?,
-        },
+        fps,
     };
     let fixed = crate::plan::Fixed {
         steps: args.steps.map(|s| s as usize),

@@ -29,16 +29,7 @@ pub fn write_report(plan: &Plan, r: &Results) -> Result<()> {
         ],
         rows: vec![vec![
             match (&r.frames, &r.keyframes) {
-                (Some(f), Some(k)) => format!(
-                    "{} of {} kept ({})",
-                    k.kept,
-                    f.frames,
-                    crate::keyframes::Dropped {
-                        untextured: k.untextured,
-                        blurry: k.blurry,
-                        duplicates: k.duplicates,
-                    }
-                ),
+                (Some(f), Some(k)) => format!("{} of {} kept ({})", k.kept, f.frames, k.dropped),
                 (Some(f), None) => f.frames.to_string(),
                 _ => "-".into(),
             },
