@@ -272,9 +272,7 @@ pub fn select_keyframes(
     let mut ms = Vec::with_capacity(names.len());
     for n in names {
         let p = images.join(n);
-        let img = image::open(&p)
-            .with_context(|| format!("{}: cannot read", p.display()))?
-            .to_rgb32f();
+        let img = loader::io::read_rgb32f(&p)?;
         let (w, h) = (img.width(), img.height());
         let s = f64::from(opts.long_side) / f64::from(w.max(h));
         let (nw, nh) = if s < 1.0 {
@@ -292,9 +290,7 @@ pub fn select_keyframes(
         let m = match masks {
             Some(dir) => {
                 let mp = dir.join(format!("{n}.png"));
-                let m = image::open(&mp)
-                    .with_context(|| format!("{}: cannot read", mp.display()))?
-                    .to_luma8();
+                let m = loader::io::read_gray8(&mp)?;
                 let m = image::imageops::resize(&m, nw, nh, image::imageops::FilterType::Nearest);
                 Some(m.as_raw().iter().map(|&v| v >= 128).collect())
             }

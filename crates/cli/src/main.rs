@@ -30,6 +30,8 @@ struct Cli {
 }
 
 fn main() {
+    #[cfg(target_os = "linux")]
+    ensure_runtime_dir();
     let cli = Cli::parse();
     let ctx = Ctx {
         json: cli.json,
@@ -52,6 +54,39 @@ fn main() {
             eprintln!("error: {msg}");
             std::process::exit(1);
         }
+    }
+}
+
+/// Without `XDG_RUNTIME_DIR` (a root shell, a container, a cron job), the
+/// Vulkan loader's Wayland support prints "error: XDG_RUNTIME_DIR is invalid
+/// or not set in the environment." twice whenever wgpu starts, which reads as
+/// romosplat's own error although training then runs normally. When the
+/// variable is unset or names no directory, point it at a private 0700
+/// folder of this user in the temporary directory (kept only when it is a
+/// directory owned by this user with no group or other access).
+#[cfg(target_os = "linux")]
+fn ensure_runtime_dir() {
+    use std::os::unix::fs::{DirBuilderExt, MetadataExt, PermissionsExt};
+    let usable = std::env::var_os("XDG_RUNTIME_DIR")
+        .is_some_and(|d| std::fs::metadata(d).is_ok_and(|m| m.is_dir()));
+    if usable {
+        return;
+    }
+    // The owner of /proc/self is this process's effective user.
+    let Ok(uid) = std::fs::metadata("/proc/self").map(|m| m.uid()) else {
+        return;
+    };
+    let dir = std::env::temp_dir().join(format!("romosplat-runtime-{uid}"));
+    let _ = std::fs::DirBuilder::new().mode(0o700).create(&dir);
+    let private = std::fs::symlink_metadata(&dir)
+        .is_ok_and(|m| m.is_dir() && m.uid() == uid && m.permissions().mode() & 0o077 == 0);
+    if private {
+        // SAFETY: called first thing in `main`, before any thread exists, so
+        // no other thread can read the environment concurrently.
+        #[allow(unsafe_code)]
+        unsafe {
+            std::env::set_var("XDG_RUNTIME_DIR", &dir)
+        };
     }
 }
 

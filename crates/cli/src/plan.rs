@@ -173,11 +173,14 @@ pub fn probe_video(ffmpeg: &Path, video: &Path) -> anyhow::Result<VideoInfo> {
                 fps,
             })
         }
-        _ => anyhow::bail!(
-            "{}: ffprobe found no video stream ({})",
-            video.display(),
-            String::from_utf8_lossy(&out.stderr).trim()
-        ),
+        _ => {
+            let why = String::from_utf8_lossy(&out.stderr);
+            let why = why.split_whitespace().collect::<Vec<_>>().join(" ");
+            if why.is_empty() {
+                anyhow::bail!("{}: the file has no video stream", video.display())
+            }
+            anyhow::bail!("{}: ffprobe found no video stream ({why})", video.display())
+        }
     }
 }
 

@@ -308,4 +308,18 @@ fn preflight_rejects_before_any_stage() {
         "{err}"
     );
     assert!(!out.join("scene").exists(), "a stage ran");
+
+    // A sound file named .mp4: one line saying it has no video stream.
+    let audio = dir.path().join("sound.mp4");
+    let st = Command::new("ffmpeg")
+        .args(["-v", "error", "-y", "-f", "lavfi", "-i", "sine=d=1"])
+        .arg(&audio)
+        .status()
+        .unwrap();
+    assert!(st.success(), "ffmpeg could not make the test sound");
+    let r = romosplat_raw(&["plan", "--video", audio.to_str().unwrap()]);
+    let err = String::from_utf8_lossy(&r.stderr);
+    assert!(!r.status.success());
+    let want = format!("{}: the file has no video stream", audio.display());
+    assert_eq!(err.trim_end(), format!("error: {want}"), "{err}");
 }

@@ -210,11 +210,70 @@ fn open_image(path: &Path) -> Result<image::DynamicImage> {
             context: String::new(),
         });
     }
-    let reader = image::ImageReader::open(path).map_err(|e| LoaderError::io(path, e))?;
-    let reader = reader
+    let bytes = read_bytes(path)?;
+    if let Some(problem) = jpeg_truncation(&bytes) {
+        return Err(LoaderError::format(path, problem));
+    }
+    let reader = image::ImageReader::new(std::io::Cursor::new(bytes))
         .with_guessed_format()
         .map_err(|e| LoaderError::io(path, e))?;
     reader.decode().map_err(|e| LoaderError::image(path, e))
+}
+
+/// Why a JPEG file is cut short, or None when it is complete or not a JPEG.
+///
+/// The `image` crate's JPEG decoder fills the missing part of a truncated
+/// file with grey and reports no error (libjpeg warns "premature end of
+/// data"), so a half-copied photo would be used as if whole. The check
+/// walks the marker segments up to the first start-of-scan and then looks
+/// for the end-of-image marker after it: inside entropy-coded data a 0xFF
+/// byte is always followed by 0x00 or a restart marker, so `FF D9` there is
+/// the real end (an embedded thumbnail's end marker lies before the scan).
+/// Bytes after the end marker (a phone's appended motion-photo video) are
+/// allowed. Anything the walk does not understand is left to the decoder.
+pub fn jpeg_truncation(bytes: &[u8]) -> Option<&'static str> {
+    if bytes.len() < 4 || bytes[0] != 0xFF || bytes[1] != 0xD8 {
+        return None;
+    }
+    let mut i = 2;
+    loop {
+        // Markers may be preceded by any number of 0xFF fill bytes.
+        if i >= bytes.len() {
+            return Some("truncated JPEG: the file ends before its image data");
+        }
+        if bytes[i] != 0xFF {
+            return None;
+        }
+        while i < bytes.len() && bytes[i] == 0xFF {
+            i += 1;
+        }
+        let Some(&marker) = bytes.get(i) else {
+            return Some("truncated JPEG: the file ends before its image data");
+        };
+        i += 1;
+        match marker {
+            // Standalone markers carry no length.
+            0x01 | 0xD0..=0xD7 => continue,
+            0xD9 => return None,
+            _ => {}
+        }
+        let Some(len) = bytes
+            .get(i..i + 2)
+            .map(|b| usize::from(u16::from_be_bytes([b[0], b[1]])))
+        else {
+            return Some("truncated JPEG: the file ends inside a header segment");
+        };
+        if marker == 0xDA {
+            let scan = i + len;
+            let complete = bytes
+                .get(scan..)
+                .is_some_and(|rest| rest.windows(2).any(|w| w == [0xFF, 0xD9]));
+            return (!complete).then_some(
+                "truncated JPEG: no end-of-image marker after the image data (the file was cut short; copy it again)",
+            );
+        }
+        i += len;
+    }
 }
 
 /// Read any supported image (PNG, JPEG) as linear-valued RGB f32 in [0, 1]
@@ -325,6 +384,62 @@ mod tests {
         assert_eq!(std::fs::read(dest.join("masks/b.png")).unwrap(), b"3");
         assert_eq!(std::fs::read(dest.join("keep.txt")).unwrap(), b"k");
         assert_eq!(std::fs::read_dir(dir.path()).unwrap().count(), 1);
+    }
+
+    /// A JPEG cut short is an error naming the file, also when an embedded
+    /// thumbnail's end marker comes before the image data; bytes appended
+    /// after the end marker are allowed.
+    #[test]
+    fn truncated_jpeg_is_an_error_naming_the_file() {
+        let dir = tempfile::tempdir().unwrap();
+        let img = RgbImage::from_fn(64, 48, |x, y| {
+            image::Rgb([(x * 4) as u8, (y * 5) as u8, 90])
+        });
+        let mut jpeg = Vec::new();
+        image::codecs::jpeg::JpegEncoder::new_with_quality(&mut jpeg, 90)
+            .encode_image(&img)
+            .unwrap();
+        // An APP1 segment holding a thumbnail-like FF D8 … FF D9, right after SOI.
+        let payload = [b"Exif\0\0".as_slice(), &[0xFF, 0xD8, 1, 2, 0xFF, 0xD9]].concat();
+        let len = (payload.len() + 2) as u16;
+        let with_thumb = [
+            &jpeg[..2],
+            &[0xFF, 0xE1],
+            &len.to_be_bytes(),
+            &payload,
+            &jpeg[2..],
+        ]
+        .concat();
+        let appended = [jpeg.as_slice(), b"ftypmp42 motion photo"].concat();
+        for (name, bytes) in [
+            ("whole.jpg", &jpeg),
+            ("thumb.jpg", &with_thumb),
+            ("appended.jpg", &appended),
+        ] {
+            let p = dir.path().join(name);
+            std::fs::write(&p, bytes).unwrap();
+            assert_eq!(read_rgb8(&p).unwrap().dimensions(), (64, 48), "{name}");
+        }
+        let cuts = [
+            ("half.jpg", jpeg[..jpeg.len() / 2].to_vec()),
+            ("last_byte.jpg", jpeg[..jpeg.len() - 1].to_vec()),
+            (
+                "thumb_half.jpg",
+                with_thumb[..with_thumb.len() * 2 / 3].to_vec(),
+            ),
+            ("header.jpg", jpeg[..5].to_vec()),
+        ];
+        for (name, bytes) in cuts {
+            let p = dir.path().join(name);
+            std::fs::write(&p, &bytes).unwrap();
+            let e = read_rgb32f(&p).unwrap_err().to_string();
+            assert!(
+                e.starts_with(&p.display().to_string()) && e.contains("truncated JPEG"),
+                "{name}: {e}"
+            );
+            assert!(!e.contains('\n'), "{e}");
+        }
+        assert_eq!(jpeg_truncation(b"\x89PNG not a jpeg"), None);
     }
 
     #[test]
