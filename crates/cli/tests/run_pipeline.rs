@@ -115,6 +115,10 @@ fn run_video_end_to_end_without_a_split() {
         ]
     );
     assert_eq!(first["frames"]["frames"], train.len());
+    // A video's frames are in capture order: the mask stage keeps it.
+    let mask: serde_json::Value =
+        serde_json::from_slice(&std::fs::read(out.join("manifests/mask.json")).unwrap()).unwrap();
+    assert_eq!(mask["options"]["frame_order"], "names", "{mask}");
     // Keyframes: the frames COLMAP and training see, with masks of the same names.
     let n = first["keyframes"]["kept"].as_u64().unwrap() as usize;
     assert!(n >= train.len() / 4 && n <= train.len(), "kept {n}");

@@ -20,6 +20,7 @@ pub mod mlp;
 pub mod objects;
 #[cfg(feature = "onnx")]
 pub mod onnx;
+pub mod order;
 pub mod overlay;
 pub mod pipeline;
 pub mod plane;

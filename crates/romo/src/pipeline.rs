@@ -156,6 +156,13 @@ pub struct RomoOptions {
     /// pair only; progress restarts with each window.
     #[cfg_attr(feature = "cli", arg(long, required = false))]
     pub chunk_frames: usize,
+    /// Order of a folder's frames ([`crate::order`]): `auto` (default)
+    /// keeps the file names' order unless it is clearly not the capture
+    /// order (its median step between neighbouring thumbnails is over 2
+    /// times a similarity path's), `names`, or `similarity`. `run --video`
+    /// uses `names`.
+    #[cfg_attr(feature = "cli", arg(long, value_enum, required = false))]
+    pub frame_order: crate::order::FrameOrder,
     /// Output folder for `masks/` etc. (default: the scene folder).
     #[cfg_attr(feature = "cli", arg(long))]
     pub out: Option<PathBuf>,
@@ -190,6 +197,7 @@ impl Default for RomoOptions {
             focal_ratio: None,
             seed: 0,
             chunk_frames: 500,
+            frame_order: crate::order::FrameOrder::Auto,
             out: None,
             save_probabilities: false,
             overlays: false,
@@ -334,6 +342,13 @@ pub struct RomoReport {
     pub image_fixed_fraction: f32,
     /// What the fixed-content test decided, in words.
     pub image_fixed: String,
+    /// Median step between neighbouring thumbnails in file-name order over
+    /// the similarity order's ([`crate::order`]; None when not measured).
+    #[serde(default)]
+    pub name_order_ratio: Option<f64>,
+    /// True when the frames were segmented in similarity order, not by name.
+    #[serde(default)]
+    pub reordered: bool,
 }
 
 /// A pair the pipeline could not use, and why.

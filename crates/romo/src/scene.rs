@@ -223,6 +223,18 @@ fn segment_source(
     if names.len() != src.len() {
         return Err(RomoError::Input("one name per frame required".into()));
     }
+    let t = Instant::now();
+    let ordering = crate::order::choose(src, opts.frame_order)?;
+    let order_ms = t.elapsed().as_secs_f64() * 1e3;
+    let ordered = Permuted {
+        src,
+        order: &ordering.order,
+    };
+    let src: &dyn FrameSource = &ordered;
+    let names: Vec<String> = ordering.order.iter().map(|&i| names[i].clone()).collect();
+    let sizes: Option<Vec<(usize, usize)>> =
+        sizes.map(|s| ordering.order.iter().map(|&i| s[i]).collect());
+    let sizes = sizes.as_deref();
     let fx = make_extractor(opts)?;
     let flow = make_flow(opts)?;
     let masks_dir = out.join("masks");
@@ -256,11 +268,49 @@ fn segment_source(
         });
     }
     let mut report = report.unwrap_or_default();
-    for (f, n) in report.frames.iter_mut().zip(names) {
+    for (f, n) in report.frames.iter_mut().zip(&names) {
         f.name = n.clone();
     }
     report.masks_dir = Some(masks_dir);
+    report.timings_ms.insert("order".into(), order_ms);
+    report.name_order_ratio = ordering.ratio.is_finite().then_some(ordering.ratio);
+    report.reordered = ordering.reordered;
+    if ordering.reordered {
+        report.warnings.insert(
+            0,
+            format!(
+                "the file names are not in capture order (neighbours by name are {:.1}× as far apart as along a similarity path): frames segmented along that path, from {} to {}; frame and pair numbers follow it (the report's `frames` list)",
+                ordering.ratio,
+                names.first().map_or("", String::as_str),
+                names.last().map_or("", String::as_str),
+            ),
+        );
+    }
     Ok(report)
+}
+
+/// `src`'s frames in `order`.
+struct Permuted<'a> {
+    src: &'a dyn FrameSource,
+    order: &'a [usize],
+}
+
+impl FrameSource for Permuted<'_> {
+    fn len(&self) -> usize {
+        self.order.len()
+    }
+    fn frame(&self, i: usize) -> Result<Rgb> {
+        let k = *self
+            .order
+            .get(i)
+            .ok_or_else(|| RomoError::Input(format!("frame {i} out of range")))?;
+        self.src.frame(k)
+    }
+    fn describe(&self, i: usize) -> String {
+        self.order
+            .get(i)
+            .map_or_else(|| format!("frame {i}"), |&k| self.src.describe(k))
+    }
 }
 
 /// Frames `start .. start + len` of `src`.

@@ -249,3 +249,68 @@ fn windows_cover_every_pair_once() {
     }
     assert_eq!(romo::scene::chunks(3640, 0), [(0, 3640)]);
 }
+
+/// Photos whose file names do not sort in capture order (renamed, merged
+/// from two phones) are segmented in similarity order: the small scene's
+/// 24 frames under shuffled names recover the capture order up to
+/// direction, and their masks score as the ordered run's. In their own
+/// order the names are kept (`name_order_ratio` 1).
+#[test]
+fn photos_named_out_of_order_are_segmented_in_capture_order() {
+    let (dir, scene) = generate("small.toml");
+    let (ordered, m_ordered) = segment(dir.path(), &scene, romo::RomoOptions::default());
+    assert!(!ordered.reordered);
+    let ratio = ordered.name_order_ratio.unwrap();
+    assert!((ratio - 1.0).abs() < 0.05, "{ratio}");
+    let extra = scene.split_indices("extra");
+    let video: Vec<usize> = (0..scene.frames.len())
+        .filter(|i| !extra.contains(i))
+        .collect();
+    // A fixed shuffle of the 24 video frames, named by their new position.
+    let perm: Vec<usize> = (0..24).map(|k| video[(k * 7 + 5) % 24]).collect();
+    let paths: Vec<_> = perm
+        .iter()
+        .map(|&i| scene.frames[i].image_path.clone())
+        .collect();
+    let names: Vec<String> = (0..24).map(|k| format!("s{k:02}.png")).collect();
+    let gt = dir.path().join("gt_shuffled");
+    std::fs::create_dir_all(&gt).unwrap();
+    for (k, &i) in perm.iter().enumerate() {
+        let src =
+            loader::masks::gt_motion_path(&scene.root.join("gt_motion"), &scene.frames[i].name);
+        std::fs::copy(src, gt.join(format!("s{k:02}.png"))).unwrap();
+    }
+    let out = dir.path().join("shuffled");
+    let mut opts = romo::RomoOptions::default();
+    opts.labels.robust.iterations = 200;
+    let report = romo::segment_paths(&paths, &names, &out, &opts, &|_, _, _| {}).unwrap();
+    assert!(report.reordered, "ratio {:?}", report.name_order_ratio);
+    assert!(
+        report.warnings[0].contains("not in capture order"),
+        "{:?}",
+        report.warnings
+    );
+    // The order segmented, as capture indices: consecutive or reversed.
+    let capture: Vec<usize> = report
+        .frames
+        .iter()
+        .map(|f| {
+            let k: usize = f.name[1..3].parse().unwrap();
+            video.iter().position(|&v| v == perm[k]).unwrap()
+        })
+        .collect();
+    let forward: Vec<usize> = (0..24).collect();
+    let backward: Vec<usize> = (0..24).rev().collect();
+    assert!(capture == forward || capture == backward, "{capture:?}");
+    let m = romo::metrics::evaluate_sequence(&out.join("masks"), &gt, "").unwrap();
+    eprintln!(
+        "J ordered {:.3}, shuffled {:.3}",
+        m_ordered.j_mean, m.j_mean
+    );
+    assert!(
+        m.j_mean >= m_ordered.j_mean - 0.05,
+        "J {} vs {}",
+        m.j_mean,
+        m_ordered.j_mean
+    );
+}

@@ -179,6 +179,10 @@ impl Plan {
         };
         romo.iterations = args.iterations;
         romo.overlays = true;
+        // A video's frames are in capture order by construction.
+        if video && romo.frame_order == romo::order::FrameOrder::Auto {
+            romo.frame_order = romo::order::FrameOrder::Names;
+        }
         // Videos: sequential matching and COLMAP's video mapper bounds;
         // photo collections: every pair. The budget picks image size,
         // features and stride; explicit pose flags override all of it.
