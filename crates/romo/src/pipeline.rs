@@ -254,6 +254,11 @@ pub trait FrameSource: Sync {
     }
     /// Frame `i` as RGB in [0, 1].
     fn frame(&self, i: usize) -> Result<Rgb>;
+    /// Frame `i`'s (width, height); sources that can read it without
+    /// decoding the frame do.
+    fn size(&self, i: usize) -> Result<(usize, usize)> {
+        self.frame(i).map(|f| (f.w(), f.h()))
+    }
     /// What to call frame `i` in an error: its file where it has one.
     fn describe(&self, i: usize) -> String {
         format!("frame {i}")

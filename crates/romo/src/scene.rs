@@ -34,6 +34,14 @@ impl FrameSource for PathSource {
             .ok_or_else(|| RomoError::Input(format!("frame {i} out of range")))?;
         Ok(Rgb::from_image(&loader::io::read_rgb32f(p)?))
     }
+    fn size(&self, i: usize) -> Result<(usize, usize)> {
+        let p = self
+            .paths
+            .get(i)
+            .ok_or_else(|| RomoError::Input(format!("frame {i} out of range")))?;
+        let (w, h) = image::image_dimensions(p).map_err(|e| loader::LoaderError::image(p, e))?;
+        Ok((w as usize, h as usize))
+    }
     fn describe(&self, i: usize) -> String {
         self.paths
             .get(i)
@@ -54,6 +62,14 @@ impl FrameSource for SceneSource<'_> {
             .get(i)
             .ok_or_else(|| RomoError::Input(format!("frame {i} out of range")))?;
         Ok(Rgb::from_image(&self.0.load_image(k)?))
+    }
+    fn size(&self, i: usize) -> Result<(usize, usize)> {
+        let f = self
+            .1
+            .get(i)
+            .and_then(|&k| self.0.frames.get(k))
+            .ok_or_else(|| RomoError::Input(format!("frame {i} out of range")))?;
+        Ok((f.intrinsics.width as usize, f.intrinsics.height as usize))
     }
     fn describe(&self, i: usize) -> String {
         self.1
@@ -212,6 +228,12 @@ pub fn segment_paths(
 
 /// `sizes[i]`: the size frame i's mask and probabilities are written at
 /// (None: the frame's own).
+///
+/// Frames of several sizes (a phone's portrait and landscape photos, a
+/// folder of photos from several cameras) cannot share a flow: each size's
+/// frames are segmented as their own sequence, in name order within it,
+/// and a frame alone at its size has no pair, so no evidence of motion: it
+/// is kept whole. The report lists the groups one after the other.
 fn segment_source(
     src: &dyn FrameSource,
     names: &[String],
@@ -223,6 +245,135 @@ fn segment_source(
     if names.len() != src.len() {
         return Err(RomoError::Input("one name per frame required".into()));
     }
+    let groups = size_groups(src)?;
+    if groups.len() <= 1 {
+        return segment_sequence(src, names, sizes, out, opts, progress);
+    }
+    let mut report: Option<RomoReport> = None;
+    let mut alone = vec![];
+    let mut start = 0;
+    for (_, members) in &groups {
+        let sub = Subset { src, idx: members };
+        let sub_names: Vec<String> = members.iter().map(|&i| names[i].clone()).collect();
+        let sub_sizes: Option<Vec<(usize, usize)>> =
+            sizes.map(|s| members.iter().map(|&i| s[i]).collect());
+        let part = if members.len() == 1 {
+            // No pair: no evidence of motion, kept whole.
+            let i = members[0];
+            let (w, h) = match sizes {
+                Some(s) => s[i],
+                None => src.size(i)?,
+            };
+            let keep = image::GrayImage::from_pixel(w as u32, h as u32, image::Luma([255]));
+            loader::masks::write_mask(
+                loader::masks::mask_path(&out.join("masks"), &names[i]),
+                &keep,
+            )?;
+            alone.push(names[i].clone());
+            RomoReport {
+                frames: vec![crate::pipeline::FrameReport {
+                    index: 0,
+                    name: names[i].clone(),
+                    ..Default::default()
+                }],
+                no_evidence_frames: vec![0],
+                ..Default::default()
+            }
+        } else {
+            segment_sequence(&sub, &sub_names, sub_sizes.as_deref(), out, opts, progress)?
+        };
+        report = Some(match report {
+            None => part,
+            Some(whole) => merge_window(whole, part, start, false),
+        });
+        start += members.len();
+    }
+    let mut report = report.unwrap_or_default();
+    let described: Vec<String> = groups
+        .iter()
+        .map(|((w, h), m)| format!("{w}x{h}: {}", m.len()))
+        .collect();
+    report.warnings.insert(
+        0,
+        format!(
+            "frames of {} sizes ({}): each size is segmented as its own sequence, one after the other in the report's `frames` list{}",
+            groups.len(),
+            described.join(", "),
+            if alone.is_empty() {
+                String::new()
+            } else {
+                format!(
+                    "; alone at its size, so without a pair and kept whole: {}",
+                    alone.join(", ")
+                )
+            }
+        ),
+    );
+    report.masks_dir = Some(out.join("masks"));
+    Ok(report)
+}
+
+/// Frames of one size: (width, height) and their indices.
+type SizeGroup = ((usize, usize), Vec<usize>);
+
+/// `src`'s frames grouped by size, groups in order of first appearance,
+/// frames in order within each.
+fn size_groups(src: &dyn FrameSource) -> Result<Vec<SizeGroup>> {
+    let sizes = (0..src.len())
+        .into_par_iter()
+        .map(|i| src.size(i))
+        .collect::<Result<Vec<_>>>()?;
+    let mut groups: Vec<SizeGroup> = vec![];
+    for (i, s) in sizes.into_iter().enumerate() {
+        match groups.iter_mut().find(|(g, _)| *g == s) {
+            Some((_, m)) => m.push(i),
+            None => groups.push((s, vec![i])),
+        }
+    }
+    Ok(groups)
+}
+
+/// The frames `idx` of `src`.
+struct Subset<'a> {
+    src: &'a dyn FrameSource,
+    idx: &'a [usize],
+}
+
+impl FrameSource for Subset<'_> {
+    fn len(&self) -> usize {
+        self.idx.len()
+    }
+    fn frame(&self, i: usize) -> Result<Rgb> {
+        let k = *self
+            .idx
+            .get(i)
+            .ok_or_else(|| RomoError::Input(format!("frame {i} out of range")))?;
+        self.src.frame(k)
+    }
+    fn size(&self, i: usize) -> Result<(usize, usize)> {
+        let k = *self
+            .idx
+            .get(i)
+            .ok_or_else(|| RomoError::Input(format!("frame {i} out of range")))?;
+        self.src.size(k)
+    }
+    fn describe(&self, i: usize) -> String {
+        self.idx
+            .get(i)
+            .map_or_else(|| format!("frame {i}"), |&k| self.src.describe(k))
+    }
+}
+
+/// One sequence of frames of one size: ordered ([`crate::order`]), then
+/// segmented in windows of at most `chunk_frames`.
+fn segment_sequence(
+    src: &dyn FrameSource,
+    names: &[String],
+    sizes: Option<&[(usize, usize)]>,
+    out: &Path,
+    opts: &RomoOptions,
+    progress: &dyn Fn(&str, usize, usize),
+) -> Result<RomoReport> {
     let t = Instant::now();
     let ordering = crate::order::choose(src, opts.frame_order)?;
     let order_ms = t.elapsed().as_secs_f64() * 1e3;
@@ -264,7 +415,7 @@ fn segment_source(
             .insert("refine_write".into(), t.elapsed().as_secs_f64() * 1e3);
         report = Some(match report {
             None => part,
-            Some(whole) => merge_window(whole, part, start),
+            Some(whole) => merge_window(whole, part, start, true),
         });
     }
     let mut report = report.unwrap_or_default();
@@ -305,6 +456,13 @@ impl FrameSource for Permuted<'_> {
             .get(i)
             .ok_or_else(|| RomoError::Input(format!("frame {i} out of range")))?;
         self.src.frame(k)
+    }
+    fn size(&self, i: usize) -> Result<(usize, usize)> {
+        let k = *self
+            .order
+            .get(i)
+            .ok_or_else(|| RomoError::Input(format!("frame {i} out of range")))?;
+        self.src.size(k)
     }
     fn describe(&self, i: usize) -> String {
         self.order
@@ -353,8 +511,11 @@ pub fn chunks(n: usize, max: usize) -> Vec<(usize, usize)> {
 }
 
 /// `whole` (frames `0 ..= start`) followed by `part` (frames `start ..`):
-/// frame `start` keeps `whole`'s entry; indices in `part` shift by `start`.
-fn merge_window(mut whole: RomoReport, part: RomoReport, start: usize) -> RomoReport {
+/// frame `start` keeps `whole`'s entry when the two share it (`shared`:
+/// windows of one video), else `part` starts after `whole` (size groups);
+/// indices in `part` shift by `start`.
+fn merge_window(mut whole: RomoReport, part: RomoReport, start: usize, shared: bool) -> RomoReport {
+    let skip = usize::from(shared);
     // The part's warnings that name frames or pairs by its own indices;
     // they are written again below with the video's.
     let mut local: Vec<String> = part
@@ -369,14 +530,14 @@ fn merge_window(mut whole: RomoReport, part: RomoReport, start: usize) -> RomoRe
     }
     whole
         .frames
-        .extend(part.frames.into_iter().skip(1).map(|mut f| {
+        .extend(part.frames.into_iter().skip(skip).map(|mut f| {
             f.index += start;
             f
         }));
     whole.dropped_frames.extend(
         part.dropped_frames
             .iter()
-            .filter(|&&t| t > 0)
+            .filter(|&&t| t >= skip)
             .map(|t| t + start),
     );
     whole.rounds.extend(part.rounds);

@@ -143,41 +143,109 @@ fn noise_frames_do_not_stop_the_stage() {
     }
 }
 
+/// Frame t of [`frame`] as a PNG of `w × h` (cropped or extended with the
+/// same panning texture).
+fn save(dir: &std::path::Path, name: &str, t: usize, (w, h): (usize, usize)) -> std::path::PathBuf {
+    let f = frame(t);
+    let p = dir.join(name);
+    image::RgbImage::from_fn(w as u32, h as u32, |x, y| {
+        let (xs, ys) = (x as usize % W, y as usize % H);
+        image::Rgb([0, 1, 2].map(|k| (f.c[k].at(xs, ys) * 255.0).round() as u8))
+    })
+    .save(&p)
+    .unwrap();
+    p
+}
+
+/// A photo folder of two sizes (landscape frames with portrait ones among
+/// them, and one square photo): each size is segmented as its own
+/// sequence, every frame gets a mask at its own size, the square photo
+/// (alone at its size) is kept whole, and one warning says so.
 #[test]
-fn frames_of_two_sizes_are_one_error_naming_both_files() {
-    // A photo folder with a portrait shot among landscape frames: the flow
-    // between frames needs one size, so the stage stops before any output.
+fn frames_of_several_sizes_are_segmented_per_size() {
     let dir = tempfile::tempdir().unwrap();
     let mut paths = vec![];
-    for (i, (w, h)) in [(W, H), (W, H), (H, W)].into_iter().enumerate() {
-        let p = dir.path().join(format!("{i:02}.png"));
-        image::RgbImage::from_fn(w as u32, h as u32, |x, y| {
-            let v = (255.0 * texture(x as f32, y as f32)) as u8;
-            image::Rgb([v, v, v])
-        })
-        .save(&p)
-        .unwrap();
-        paths.push(p);
+    let mut names = vec![];
+    for t in 0..10 {
+        let size = match t {
+            3 | 5 | 7 => (H, W),
+            9 => (H, H),
+            _ => (W, H),
+        };
+        let name = format!("{t:02}.png");
+        paths.push(save(dir.path(), &name, t, size));
+        names.push(name);
     }
-    let names: Vec<String> = (0..3).map(|i| format!("{i:02}.png")).collect();
     let out = dir.path().join("out");
-    let e = romo::segment_paths(
-        &paths,
-        &names,
-        &out,
-        &romo::RomoOptions::default(),
-        &|_, _, _| {},
-    )
-    .unwrap_err()
-    .to_string();
+    let mut o = romo::RomoOptions::default();
+    o.labels.robust.iterations = 200;
+    let r = romo::segment_paths(&paths, &names, &out, &o, &|_, _, _| {}).unwrap();
+    let listed: Vec<&str> = r.frames.iter().map(|f| f.name.as_str()).collect();
+    assert_eq!(
+        listed,
+        [
+            "00.png", "01.png", "02.png", "04.png", "06.png", "08.png", "03.png", "05.png",
+            "07.png", "09.png"
+        ]
+    );
+    let idx: Vec<usize> = r.frames.iter().map(|f| f.index).collect();
+    assert_eq!(idx, (0..10).collect::<Vec<_>>());
+    assert_eq!(r.no_evidence_frames, [9], "{:?}", r.warnings);
+    assert!(
+        r.warnings[0].contains("frames of 3 sizes (160x120: 6, 120x160: 3, 120x120: 1)")
+            && r.warnings[0].contains("kept whole: 09.png"),
+        "{:?}",
+        r.warnings
+    );
+    for (t, p) in paths.iter().enumerate() {
+        let img = image::open(p).unwrap();
+        let m = image::open(out.join(format!("masks/{t:02}.png.png")))
+            .unwrap()
+            .to_luma8();
+        assert_eq!(m.dimensions(), (img.width(), img.height()), "frame {t}");
+        if t == 9 {
+            assert!(
+                m.pixels().all(|p| p.0[0] == 255),
+                "the square photo is kept whole"
+            );
+        }
+    }
+    // The landscape sequence finds its moving square.
+    let moving = |t: usize| {
+        let m = image::open(out.join(format!("masks/{t:02}.png.png")))
+            .unwrap()
+            .to_luma8();
+        m.pixels().filter(|p| p.0[0] == 0).count()
+    };
+    assert!(
+        moving(0) > 100 && moving(4) > 100,
+        "{} {}",
+        moving(0),
+        moving(4)
+    );
+}
+
+/// `segment_frames` itself (one sequence) still needs one size: its error
+/// names both files.
+#[test]
+fn one_sequence_of_two_sizes_is_one_error_naming_both_files() {
+    let dir = tempfile::tempdir().unwrap();
+    let paths: Vec<_> = [(W, H), (W, H), (H, W)]
+        .into_iter()
+        .enumerate()
+        .map(|(t, size)| save(dir.path(), &format!("{t:02}.png"), t, size))
+        .collect();
+    let o = romo::RomoOptions::default();
+    let fx = romo::scene::make_extractor(&o).unwrap();
+    let flow = romo::scene::make_flow(&o).unwrap();
+    let src = romo::scene::PathSource { paths };
+    let e = romo::pipeline::segment_frames(&src, &o, flow.as_ref(), fx.as_ref(), &|_, _, _| {})
+        .err()
+        .unwrap()
+        .to_string();
     assert!(
         e.contains("02.png is 120x160") && e.contains("00.png is 160x120"),
         "{e}"
-    );
-    assert!(
-        !out.join("masks").exists(),
-        "partial output in {}",
-        out.display()
     );
 }
 
