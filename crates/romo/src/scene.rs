@@ -231,7 +231,7 @@ pub fn segment_paths(
 ///
 /// Frames of several sizes (a phone's portrait and landscape photos, a
 /// folder of photos from several cameras) cannot share a flow: each size's
-/// frames are segmented as their own sequence, in name order within it,
+/// frames are segmented as their own sequence (ordered as one folder is),
 /// and a frame alone at its size has no pair, so no evidence of motion: it
 /// is kept whole. The report lists the groups one after the other.
 fn segment_source(
@@ -269,14 +269,15 @@ fn segment_source(
                 loader::masks::mask_path(&out.join("masks"), &names[i]),
                 &keep,
             )?;
-            alone.push(names[i].clone());
+            alone.push((start, names[i].clone()));
+            // Without evidence, but named in the one warning below rather
+            // than in one "no evidence" warning each.
             RomoReport {
                 frames: vec![crate::pipeline::FrameReport {
                     index: 0,
                     name: names[i].clone(),
                     ..Default::default()
                 }],
-                no_evidence_frames: vec![0],
                 ..Default::default()
             }
         } else {
@@ -289,6 +290,11 @@ fn segment_source(
         start += members.len();
     }
     let mut report = report.unwrap_or_default();
+    report
+        .no_evidence_frames
+        .extend(alone.iter().map(|(t, _)| *t));
+    report.no_evidence_frames.sort_unstable();
+    let alone: Vec<String> = alone.into_iter().map(|(_, n)| n).collect();
     let described: Vec<String> = groups
         .iter()
         .map(|((w, h), m)| format!("{w}x{h}: {}", m.len()))
@@ -333,7 +339,7 @@ fn size_groups(src: &dyn FrameSource) -> Result<Vec<SizeGroup>> {
     Ok(groups)
 }
 
-/// The frames `idx` of `src`.
+/// The frames `idx` of `src`, in that order.
 struct Subset<'a> {
     src: &'a dyn FrameSource,
     idx: &'a [usize],
@@ -377,9 +383,9 @@ fn segment_sequence(
     let t = Instant::now();
     let ordering = crate::order::choose(src, opts.frame_order)?;
     let order_ms = t.elapsed().as_secs_f64() * 1e3;
-    let ordered = Permuted {
+    let ordered = Subset {
         src,
-        order: &ordering.order,
+        idx: &ordering.order,
     };
     let src: &dyn FrameSource = &ordered;
     let names: Vec<String> = ordering.order.iter().map(|&i| names[i].clone()).collect();
@@ -438,37 +444,6 @@ fn segment_sequence(
         );
     }
     Ok(report)
-}
-
-/// `src`'s frames in `order`.
-struct Permuted<'a> {
-    src: &'a dyn FrameSource,
-    order: &'a [usize],
-}
-
-impl FrameSource for Permuted<'_> {
-    fn len(&self) -> usize {
-        self.order.len()
-    }
-    fn frame(&self, i: usize) -> Result<Rgb> {
-        let k = *self
-            .order
-            .get(i)
-            .ok_or_else(|| RomoError::Input(format!("frame {i} out of range")))?;
-        self.src.frame(k)
-    }
-    fn size(&self, i: usize) -> Result<(usize, usize)> {
-        let k = *self
-            .order
-            .get(i)
-            .ok_or_else(|| RomoError::Input(format!("frame {i} out of range")))?;
-        self.src.size(k)
-    }
-    fn describe(&self, i: usize) -> String {
-        self.order
-            .get(i)
-            .map_or_else(|| format!("frame {i}"), |&k| self.src.describe(k))
-    }
 }
 
 /// Frames `start .. start + len` of `src`.
