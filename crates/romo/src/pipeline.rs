@@ -153,7 +153,7 @@ pub struct RomoOptions {
     /// this many frames, each sharing one frame with the next, each with
     /// its own MLP (`romo::scene::chunks`): 500 frames need about 6 GB. The
     /// shared frame keeps the earlier window's mask, made from its backward
-    /// pair only; progress restarts with each window.
+    /// pair only; the progress line names the window it counts.
     #[cfg_attr(feature = "cli", arg(long, required = false))]
     pub chunk_frames: usize,
     /// Order of a folder's frames ([`crate::order`]): `auto` (default)

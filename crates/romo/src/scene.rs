@@ -252,7 +252,7 @@ fn segment_source(
     let mut report: Option<RomoReport> = None;
     let mut alone = vec![];
     let mut start = 0;
-    for (_, members) in &groups {
+    for ((sub_w, sub_h), members) in &groups {
         let sub = Subset { src, idx: members };
         let sub_names: Vec<String> = members.iter().map(|&i| names[i].clone()).collect();
         let sub_sizes: Option<Vec<(usize, usize)>> =
@@ -281,7 +281,10 @@ fn segment_source(
                 ..Default::default()
             }
         } else {
-            segment_sequence(&sub, &sub_names, sub_sizes.as_deref(), out, opts, progress)?
+            let labelled = |stage: &str, done: usize, total: usize| {
+                progress(&format!("{stage}, {}x{} frames", sub_w, sub_h), done, total)
+            };
+            segment_sequence(&sub, &sub_names, sub_sizes.as_deref(), out, opts, &labelled)?
         };
         report = Some(match report {
             None => part,
@@ -396,12 +399,23 @@ fn segment_sequence(
     let flow = make_flow(opts)?;
     let masks_dir = out.join("masks");
     let mut report: Option<RomoReport> = None;
-    for (k, (start, end)) in chunks(src.len(), opts.chunk_frames).into_iter().enumerate() {
+    let windows = chunks(src.len(), opts.chunk_frames);
+    let count = windows.len();
+    for (k, (start, end)) in windows.into_iter().enumerate() {
         let sub = Window {
             src,
             start,
             len: end - start,
         };
+        // Each window counts its own frames: say which window it is.
+        let labelled = |stage: &str, done: usize, total: usize| {
+            progress(
+                &format!("{stage}, window {} of {count}", k + 1),
+                done,
+                total,
+            )
+        };
+        let progress: &dyn Fn(&str, usize, usize) = if count > 1 { &labelled } else { progress };
         let seg = segment_frames(&sub, opts, flow.as_ref(), fx.as_ref(), progress)?;
         // A window's first frame is the previous window's last, written there.
         let first = usize::from(k > 0);

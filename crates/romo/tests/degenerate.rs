@@ -179,7 +179,13 @@ fn frames_of_several_sizes_are_segmented_per_size() {
     let out = dir.path().join("out");
     let mut o = romo::RomoOptions::default();
     o.labels.robust.iterations = 200;
-    let r = romo::segment_paths(&paths, &names, &out, &o, &|_, _, _| {}).unwrap();
+    let stages = std::sync::Mutex::new(std::collections::BTreeSet::new());
+    let r = romo::segment_paths(&paths, &names, &out, &o, &|s, _, _| {
+        stages.lock().unwrap().insert(s.to_string());
+    })
+    .unwrap();
+    let stages = stages.into_inner().unwrap();
+    assert!(stages.contains("flow, 120x160 frames"), "{stages:?}");
     let listed: Vec<&str> = r.frames.iter().map(|f| f.name.as_str()).collect();
     assert_eq!(
         listed,
@@ -271,8 +277,17 @@ fn warnings_of_a_later_window_name_the_videos_frames() {
     o.labels.robust.iterations = 200;
     o.chunk_frames = 8;
     assert_eq!(romo::scene::chunks(14, 8), [(0, 8), (7, 14)]);
-    let r =
-        romo::segment_paths(&paths, &names, &dir.path().join("out"), &o, &|_, _, _| {}).unwrap();
+    let stages = std::sync::Mutex::new(std::collections::BTreeSet::new());
+    let r = romo::segment_paths(&paths, &names, &dir.path().join("out"), &o, &|s, _, _| {
+        stages.lock().unwrap().insert(s.to_string());
+    })
+    .unwrap();
+    // Each window counts its own frames, and the progress line says which.
+    let stages = stages.into_inner().unwrap();
+    assert!(
+        stages.contains("flow, window 1 of 2") && stages.contains("write, window 2 of 2"),
+        "{stages:?}"
+    );
     assert_eq!(r.no_evidence_frames, [10]);
     let pairs: Vec<usize> = r.skipped_pairs.iter().map(|p| p.pair).collect();
     assert_eq!(pairs, [9, 10]);
