@@ -111,7 +111,7 @@ pub struct ObjectOptions {
     #[cfg_attr(feature = "cli", arg(skip))]
     pub superpixel_min_size: usize,
     /// Mask propagation along the flow: frames `K` either side whose cut
-    /// masks vote for each pixel (0 = off; see [`propagation_prior`]).
+    /// masks vote for each pixel (0 = off; see `objects::propagation_prior`).
     /// After the cut, each pixel follows its cycle-consistent flow up to
     /// `K` frames forward and backward; the frames it reaches that call it
     /// moving vote with weight `propagation_decay^(k−1)` at distance `k`,

@@ -25,7 +25,7 @@ use serde::{Deserialize, Serialize};
 #[cfg_attr(feature = "cli", derive(clap::ValueEnum))]
 pub enum FrameOrder {
     /// File-name order, unless it is clearly not the capture order: then
-    /// the similarity order (default). Over [`MAX_FRAMES`] frames the
+    /// the similarity order (default). Over 4000 frames (`MAX_FRAMES`) the
     /// names' order is kept.
     #[default]
     Auto,

@@ -156,7 +156,7 @@ pub struct RomoOptions {
     /// pair only; the progress line names the window it counts.
     #[cfg_attr(feature = "cli", arg(long, required = false))]
     pub chunk_frames: usize,
-    /// Order of a folder's frames ([`crate::order`]): `auto` (default)
+    /// Order of a folder's frames (`romo::order`): `auto` (default)
     /// keeps the file names' order unless it is clearly not the capture
     /// order (its median step between neighbouring thumbnails is over 2
     /// times a similarity path's), `names`, or `similarity`. `run --video`
