@@ -154,14 +154,6 @@ fn distances(thumbs: &[Vec<f32>]) -> Vec<f32> {
     d
 }
 
-/// Length of the path visiting `order` in turn.
-pub fn path_length(d: &[f32], n: usize, order: &[usize]) -> f64 {
-    order
-        .windows(2)
-        .map(|w| f64::from(d[w[0] * n + w[1]]))
-        .sum()
-}
-
 /// Median distance between consecutive frames of `order`: a few frames
 /// unlike all others (a black frame, a flash, a blurred photo) do not
 /// change it, while a shuffled order raises it to a random pair's.
@@ -368,6 +360,14 @@ pub fn choose<S: FrameSource + ?Sized>(src: &S, how: FrameOrder) -> Result<Order
 #[cfg(test)]
 mod tests {
     use super::*;
+
+    /// Length of the path visiting `order` in turn.
+    fn path_length(d: &[f32], n: usize, order: &[usize]) -> f64 {
+        order
+            .windows(2)
+            .map(|w| f64::from(d[w[0] * n + w[1]]))
+            .sum()
+    }
 
     /// Frames of a pan over a smooth random texture, three pixels a frame
     /// (more than the shift search absorbs).

@@ -253,17 +253,10 @@ fn segment_source(
     let mut alone = vec![];
     let mut start = 0;
     for ((sub_w, sub_h), members) in &groups {
-        let sub = Subset { src, idx: members };
-        let sub_names: Vec<String> = members.iter().map(|&i| names[i].clone()).collect();
-        let sub_sizes: Option<Vec<(usize, usize)>> =
-            sizes.map(|s| members.iter().map(|&i| s[i]).collect());
         let part = if members.len() == 1 {
             // No pair: no evidence of motion, kept whole.
             let i = members[0];
-            let (w, h) = match sizes {
-                Some(s) => s[i],
-                None => src.size(i)?,
-            };
+            let (w, h) = sizes.map_or((*sub_w, *sub_h), |s| s[i]);
             let keep = image::GrayImage::from_pixel(w as u32, h as u32, image::Luma([255]));
             loader::masks::write_mask(
                 loader::masks::mask_path(&out.join("masks"), &names[i]),
@@ -281,6 +274,10 @@ fn segment_source(
                 ..Default::default()
             }
         } else {
+            let sub = Subset { src, idx: members };
+            let sub_names: Vec<String> = members.iter().map(|&i| names[i].clone()).collect();
+            let sub_sizes: Option<Vec<(usize, usize)>> =
+                sizes.map(|s| members.iter().map(|&i| s[i]).collect());
             let labelled = |stage: &str, done: usize, total: usize| {
                 progress(&format!("{stage}, {}x{} frames", sub_w, sub_h), done, total)
             };
