@@ -437,15 +437,23 @@ mod tests {
     }
 
     /// A black frame in a short video is unlike every other frame, so any
-    /// path has a long step at it: the median step, unlike the path
-    /// length, does not move, and the names' order stays.
+    /// path has a long step at it, and the names' order two: the path
+    /// length grows by 31% in the names' order, the median step does not
+    /// move, and the names' order stays.
     #[test]
     fn a_black_frame_does_not_reorder_a_video() {
         let mut thumbs = pan(14);
         thumbs[10] = vec![0.0; THUMB_W * THUMB_H];
+        let d = distances(&thumbs);
+        let names: Vec<usize> = (0..14).collect();
+        let path = short_path(&d, 14);
+        let by_length = path_length(&d, 14, &names) / path_length(&d, 14, &path);
+        let by_median = median_step(&d, 14, &names) / median_step(&d, 14, &path);
+        assert!(by_length > 1.25, "{by_length}");
+        assert!((by_median - 1.0).abs() < 0.1, "{by_median}");
         let got = choose(frames(&thumbs).as_slice(), FrameOrder::Auto).unwrap();
         assert!(!got.reordered, "ratio {}", got.ratio);
-        assert_eq!(got.order, (0..14).collect::<Vec<_>>());
+        assert_eq!(got.order, names);
     }
 
     #[test]
