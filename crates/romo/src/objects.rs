@@ -64,6 +64,12 @@ pub struct ObjectOptions {
     /// Weight `w_g` of the geometric evidence (default 1).
     #[cfg_attr(feature = "cli", arg(skip))]
     pub geometry_weight: f32,
+    /// Residual over mean flow `S / v` at which the geometric evidence is
+    /// 0 (default none: the geometric mean of the thresholds, `√(u·l)`;
+    /// 1.0 puts it at the U threshold). The scale is kept: `g` moves by 1
+    /// per factor `√(u / l)` of `S`.
+    #[cfg_attr(feature = "cli", arg(skip))]
+    pub geometry_zero: Option<f32>,
     /// Weight `w_m` of the MLP's probability (default 1).
     #[cfg_attr(feature = "cli", arg(skip))]
     pub mlp_weight: f32,
@@ -146,6 +152,7 @@ impl Default for ObjectOptions {
         Self {
             method: ObjectMethod::GraphCut,
             geometry_weight: 1.0,
+            geometry_zero: None,
             mlp_weight: 1.0,
             colour_weight: 1.0,
             smoothness: 1.0,
@@ -190,6 +197,14 @@ impl ObjectOptions {
                     .into(),
             ));
         }
+        if self
+            .geometry_zero
+            .is_some_and(|z| !(z.is_finite() && z > 0.0))
+        {
+            return Err(crate::RomoError::Options(
+                "objects: geometry_zero must be finite and > 0".into(),
+            ));
+        }
         if !(self.propagation_decay.is_finite() && (0.0..=1.0).contains(&self.propagation_decay)) {
             return Err(crate::RomoError::Options(
                 "objects: propagation_decay must be in [0, 1]".into(),
@@ -228,6 +243,8 @@ pub struct Evidence<'a> {
     pub u_factor: f32,
     /// RoMo's L factor `l`.
     pub l_factor: f32,
+    /// `ObjectOptions::geometry_zero`.
+    pub geometry_zero: Option<f32>,
 }
 
 /// Capacity units per unit of evidence.
@@ -241,12 +258,12 @@ fn colour_bin(rgb: &Rgb, i: usize) -> usize {
 }
 
 /// Geometric evidence `g` of one pixel (None: no residual, no texture or
-/// no flow).
-fn geometry(s: f32, v: f32, textured: bool, u: f32, l: f32) -> Option<f32> {
+/// no flow); 0 at `S = zero · v` (default `√(u·l)`).
+fn geometry(s: f32, v: f32, textured: bool, u: f32, l: f32, zero: Option<f32>) -> Option<f32> {
     if !textured || !s.is_finite() || v <= 0.0 {
         return None;
     }
-    let pivot = v * (u * l).sqrt();
+    let pivot = v * zero.unwrap_or((u * l).sqrt());
     let half = (u / l).sqrt().ln();
     Some(((s.max(1e-6) / pivot).ln() / half).clamp(-1.0, 1.0))
 }
@@ -255,7 +272,15 @@ fn geometry(s: f32, v: f32, textured: bool, u: f32, l: f32) -> Option<f32> {
 /// folded in: U from any test is confident motion (+1); a small residual
 /// that a label test took out of L is no evidence (0); no residual, 0.
 fn pixel_geometry(e: &Evidence, t: usize, i: usize) -> f32 {
-    let g = geometry(e.s[t][i], e.v[t], e.textured[t][i], e.u_factor, e.l_factor).unwrap_or(0.0);
+    let g = geometry(
+        e.s[t][i],
+        e.v[t],
+        e.textured[t][i],
+        e.u_factor,
+        e.l_factor,
+        e.geometry_zero,
+    )
+    .unwrap_or(0.0);
     if e.u[t][i] {
         1.0
     } else if !e.l[t][i] && g <= -1.0 {
@@ -715,6 +740,7 @@ mod tests {
             valid_b: &[],
             u_factor: 1.0,
             l_factor: 0.1,
+            geometry_zero: None,
         };
         let o = ObjectOptions::default();
         let m = graph_cut(&e, &o);
@@ -770,6 +796,7 @@ mod tests {
             valid_b: &[],
             u_factor: 1.0,
             l_factor: 0.1,
+            geometry_zero: None,
         };
         let o = ObjectOptions {
             colour_weight: 0.0,
@@ -875,6 +902,7 @@ mod tests {
                 valid_b: &self.valid_b,
                 u_factor: 1.0,
                 l_factor: 0.1,
+                geometry_zero: None,
             }
         }
     }
@@ -1007,15 +1035,36 @@ mod tests {
         }
     }
 
+    #[test]
+    fn a_geometry_zero_that_is_not_positive_is_refused() {
+        for z in [0.0, -1.0, f32::NAN, f32::INFINITY] {
+            let o = ObjectOptions {
+                geometry_zero: Some(z),
+                ..Default::default()
+            };
+            assert!(o.validate().is_err(), "{z}");
+        }
+        let o = ObjectOptions {
+            geometry_zero: Some(1.0),
+            ..Default::default()
+        };
+        assert!(o.validate().is_ok());
+    }
+
     /// A textureless pixel's residual is no evidence.
     #[test]
     fn geometry_needs_texture_and_sits_between_the_thresholds() {
-        assert_eq!(geometry(5.0, 1.0, false, 1.0, 0.1), None);
-        assert_eq!(geometry(f32::NAN, 1.0, true, 1.0, 0.1), None);
-        let g = |s| geometry(s, 2.0, true, 1.0, 0.1).unwrap();
+        assert_eq!(geometry(5.0, 1.0, false, 1.0, 0.1, None), None);
+        assert_eq!(geometry(f32::NAN, 1.0, true, 1.0, 0.1, None), None);
+        let g = |s| geometry(s, 2.0, true, 1.0, 0.1, None).unwrap();
         assert!((g(2.0) - 1.0).abs() < 1e-5);
         assert!((g(0.2) + 1.0).abs() < 1e-5);
         assert!(g(2.0 * 0.1f32.sqrt()).abs() < 1e-5);
         assert_eq!(g(100.0), 1.0);
+        // Zero at the U threshold: the same scale, shifted.
+        let z = |s| geometry(s, 2.0, true, 1.0, 0.1, Some(1.0)).unwrap();
+        assert!(z(2.0).abs() < 1e-5);
+        assert!((z(2.0 * 0.1f32.sqrt()) + 1.0).abs() < 1e-5);
+        assert!((z(2.0 * 10f32.sqrt()) - 1.0).abs() < 1e-5);
     }
 }

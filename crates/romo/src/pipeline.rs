@@ -1133,6 +1133,7 @@ fn refine_grid(
             valid_b: &pr.valid_b,
             u_factor: o.labels.u_factor,
             l_factor: o.labels.l_factor,
+            geometry_zero: o.refine.objects.geometry_zero,
         };
         let moving = tm.time("objects", || graph_cut(&ev, &o.refine.objects));
         for (p, m) in planes.iter_mut().zip(moving) {
