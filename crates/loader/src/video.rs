@@ -1,6 +1,14 @@
 //! Video → frames through an `ffmpeg` subprocess: the scene's `images/`
 //! folder (`%05d.png`, sorted = capture order) from any video ffmpeg can
 //! decode, optionally resampled to a frame rate.
+//!
+//! Frames are 8-bit RGB whatever the video's pixel format: a 10-bit video
+//! (a phone's HDR HEVC) would otherwise give 16-bit PNGs, which COLMAP 3.8
+//! cannot read (its feature extractor skips them with "Failed to read image
+//! file format"); HDR values are converted, not tone mapped. Without `fps`
+//! every decoded frame is written once (`-fps_mode passthrough`): a phone's
+//! variable-frame-rate video would otherwise get duplicated frames wherever
+//! its frame interval grows.
 
 use crate::error::{LoaderError, Result};
 use std::path::{Path, PathBuf};
@@ -91,10 +99,11 @@ fn run_ffmpeg(program: &str, video: &Path, out: &Path, fps: Option<f64>) -> Resu
     let mut cmd = Command::new(program);
     cmd.args(["-hide_banner", "-loglevel", "error", "-nostdin", "-y", "-i"])
         .arg(video);
-    if let Some(f) = fps {
-        cmd.arg("-vf").arg(format!("fps={f}"));
-    }
-    cmd.arg(out.join(FRAME_PATTERN));
+    match fps {
+        Some(f) => cmd.arg("-vf").arg(format!("fps={f}")),
+        None => cmd.args(["-fps_mode", "passthrough"]),
+    };
+    cmd.args(["-pix_fmt", "rgb24"]).arg(out.join(FRAME_PATTERN));
     let output = cmd.output().map_err(|e| {
         if e.kind() == std::io::ErrorKind::NotFound {
             LoaderError::External(format!(
@@ -173,7 +182,13 @@ mod tests {
     }
 
     fn make_video(dir: &Path) -> PathBuf {
-        let v = dir.join("test.mkv");
+        make_video_as(dir, "test.mkv", "testsrc=size=64x48:rate=10", &[])
+    }
+
+    /// `source` (an ffmpeg lavfi graph) encoded with FFV1 into `dir/name`,
+    /// `extra` arguments before the output.
+    fn make_video_as(dir: &Path, name: &str, source: &str, extra: &[&str]) -> PathBuf {
+        let v = dir.join(name);
         let st = Command::new("ffmpeg")
             .args([
                 "-hide_banner",
@@ -185,8 +200,9 @@ mod tests {
                 "lavfi",
                 "-i",
             ])
-            .arg("testsrc=size=64x48:rate=10")
+            .arg(source)
             .args(["-t", "1", "-c:v", "ffv1"])
+            .args(extra)
             .arg(&v)
             .status()
             .unwrap();
@@ -220,6 +236,36 @@ mod tests {
         // A second run into the same folder refuses to overwrite.
         let e = extract_frames(&v, &out, None).unwrap_err().to_string();
         assert!(e.contains("images") && e.contains("not empty"), "{e}");
+    }
+
+    /// A 16-bit video gives 8-bit RGB frames (COLMAP reads no others), and
+    /// a variable-frame-rate video one frame per decoded frame.
+    #[test]
+    fn deep_and_variable_rate_videos_give_one_8_bit_frame_per_frame() {
+        if !need_ffmpeg() {
+            return;
+        }
+        let dir = tempfile::tempdir().unwrap();
+        let v = make_video_as(
+            dir.path(),
+            "deep.mkv",
+            "testsrc=size=64x48:rate=10",
+            &["-pix_fmt", "rgb48le"],
+        );
+        let frames = extract_frames(&v, dir.path().join("deep"), None).unwrap();
+        assert_eq!(frames.len(), 10);
+        let img = image::open(&frames[3]).unwrap();
+        assert_eq!(img.color(), image::ColorType::Rgb8);
+        // Frames 5–9 a second later than their place at 10 fps: 10 frames
+        // over 1.9 s, which a constant-rate output pads to 20.
+        let v = make_video_as(
+            dir.path(),
+            "vfr.mkv",
+            "testsrc=size=64x48:rate=10:duration=1,setpts='if(lt(N,5),PTS,PTS+1/TB)'",
+            &["-t", "3", "-fps_mode", "passthrough"],
+        );
+        let frames = extract_frames(&v, dir.path().join("vfr"), None).unwrap();
+        assert_eq!(frames.len(), 10);
     }
 
     #[test]

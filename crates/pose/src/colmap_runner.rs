@@ -537,6 +537,105 @@ fn distinct_sizes(dir: &Path, names: &[String]) -> Result<Vec<(u32, u32)>> {
     Ok(sizes)
 }
 
+/// Folder under the work folder that holds 8-bit copies for COLMAP.
+const EIGHT_BIT_DIR: &str = "images_8bit";
+
+/// Bits per channel of `path`'s pixels, read from its header; `None` when
+/// the `image` crate cannot read the header (COLMAP is left to try).
+fn bits_per_channel(path: &Path) -> Option<u16> {
+    use image::ImageDecoder;
+    let colour = image::ImageReader::open(path)
+        .ok()?
+        .with_guessed_format()
+        .ok()?
+        .into_decoder()
+        .ok()?
+        .color_type();
+    Some(colour.bits_per_pixel() / u16::from(colour.channel_count()).max(1))
+}
+
+/// COLMAP 3.8 reads 8-bit images only: FreeImage cannot convert 16-bit PNG
+/// or TIFF pixels, so the feature extractor skips such an image ("Failed to
+/// read image file format") and leaves it out. When any of `names` has more
+/// than 8 bits per channel, `work/images_8bit/` is made anew with an 8-bit
+/// copy of each such image under its own name (and format) and a link to
+/// each other image, and returned with the number of copies; `None` when
+/// every image is 8-bit. Image names, and so the masks and the model, are
+/// unchanged.
+fn eight_bit_images(
+    images: &Path,
+    names: &[String],
+    work: &Path,
+) -> Result<Option<(PathBuf, usize)>> {
+    let mut deep = Vec::new();
+    for n in names {
+        deep.push(bits_per_channel(&images.join(n)).is_some_and(|b| b > 8));
+    }
+    let copies = deep.iter().filter(|d| **d).count();
+    if copies == 0 {
+        return Ok(None);
+    }
+    let dir = work.join(EIGHT_BIT_DIR);
+    if dir.exists() {
+        std::fs::remove_dir_all(&dir).map_err(|e| PoseError::io(&dir, e))?;
+    }
+    for (n, deep) in names.iter().zip(deep) {
+        let src = images.join(n);
+        let dst = dir.join(n);
+        if let Some(parent) = dst.parent() {
+            std::fs::create_dir_all(parent).map_err(|e| PoseError::io(parent, e))?;
+        }
+        if deep {
+            let img = image::open(&src).map_err(|e| {
+                PoseError::Invalid(format!("{}: cannot read the image: {e}", src.display()))
+            })?;
+            let img = if img.color().has_color() {
+                image::DynamicImage::ImageRgb8(img.to_rgb8())
+            } else {
+                image::DynamicImage::ImageLuma8(img.to_luma8())
+            };
+            img.save(&dst).map_err(|e| {
+                PoseError::Invalid(format!(
+                    "{}: cannot write an 8-bit copy: {e}",
+                    dst.display()
+                ))
+            })?;
+        } else {
+            let src = std::path::absolute(&src).map_err(|e| PoseError::io(&src, e))?;
+            link_or_copy(&src, &dst)?;
+        }
+    }
+    Ok(Some((dir, copies)))
+}
+
+#[cfg(unix)]
+fn link_or_copy(src: &Path, dst: &Path) -> Result<()> {
+    std::os::unix::fs::symlink(src, dst).map_err(|e| PoseError::io(dst, e))
+}
+
+#[cfg(not(unix))]
+fn link_or_copy(src: &Path, dst: &Path) -> Result<()> {
+    std::fs::copy(src, dst)
+        .map(|_| ())
+        .map_err(|e| PoseError::io(dst, e))
+}
+
+/// Images the feature extractor could not read, from its log: each
+/// `Name: …` followed by an `ERROR: …` line, as (name, error).
+fn unreadable_images(log: &str) -> Vec<(String, String)> {
+    let mut out = Vec::new();
+    let mut name: Option<&str> = None;
+    for line in log.lines().map(str::trim) {
+        if let Some(n) = line.strip_prefix("Name:") {
+            name = Some(n.trim());
+        } else if let (Some(err), Some(n)) = (line.strip_prefix("ERROR:"), name) {
+            out.push((n.to_string(), err.trim().to_string()));
+            name = None;
+        }
+    }
+    out
+}
+
 /// Remove the database and its SQLite side files.
 fn remove_database(db: &Path) -> Result<()> {
     let mut side = db.as_os_str().to_os_string();
@@ -657,6 +756,19 @@ pub fn run_colmap_cancellable(
     let db = paths.work.join("database.db");
     let state_path = paths.work.join("resume.json");
     let (feature_key, match_key) = resume_keys(paths, opts, &names, &version)?;
+    // COLMAP reads 8-bit copies of deeper images; keys stay on the originals.
+    let eight_bit = eight_bit_images(&paths.images, &names, &paths.work)?;
+    let staged;
+    let paths = match &eight_bit {
+        Some((dir, _)) => {
+            staged = ColmapPaths {
+                images: dir.clone(),
+                ..paths.clone()
+            };
+            &staged
+        }
+        None => paths,
+    };
     let saved = resume::load(&state_path);
     let decision = resume::decide(saved.as_ref(), db.is_file(), &feature_key, &match_key);
     let sparse = paths.work.join("sparse");
@@ -676,6 +788,16 @@ pub fn run_colmap_cancellable(
         work: paths.work.clone(),
         images: names.len() as u64,
     };
+    if let Some((dir, copies)) = &eight_bit {
+        r.note(
+            "feature_extractor",
+            format!(
+                "{copies} of {} images have more than 8 bits per channel, which COLMAP 3.8 cannot read: it reads 8-bit copies in {}",
+                names.len(),
+                dir.display()
+            ),
+        );
+    }
     if per_image {
         r.note(
             "feature_extractor",
@@ -870,8 +992,24 @@ impl Steps<'_> {
         a.extend(self.seed.clone());
         let out = r.step("feature_extractor", "feature_extractor", a)?;
         require_success("feature_extractor", &out)?;
-        Ok(std::fs::read_to_string(&out.log)
-            .unwrap_or_default()
+        let log = std::fs::read_to_string(&out.log).unwrap_or_default();
+        // COLMAP exits 0 when it skips images it cannot read; the matcher
+        // then aborts on an empty database. Name them here instead.
+        let unreadable = unreadable_images(&log);
+        if let Some((name, err)) = unreadable.first() {
+            let images = r.images;
+            let message = format!(
+                "COLMAP could not read {} of {images} images in {} (first {name}: {err}); log {}",
+                unreadable.len(),
+                self.paths.images.display(),
+                out.log.display()
+            );
+            if unreadable.len() as u64 + 2 > images {
+                return Err(PoseError::Degenerate(message));
+            }
+            r.note("feature_extractor", format!("warning: {message}"));
+        }
+        Ok(log
             .lines()
             .filter(|l| l.contains("SKIP: Features for image already extracted"))
             .count())

@@ -1,9 +1,11 @@
-//! The pose stage resumes from its kept database, and retries a failed
-//! initialisation once with relaxed settings.
+//! The pose stage resumes from its kept database, retries a failed
+//! initialisation once with relaxed settings, and copes with images COLMAP
+//! cannot read (16-bit copies, named failures) and of several sizes.
 //!
-//! `interrupted_run_resumes` runs real COLMAP 3.8 on 10 frames of the small
-//! built-in scene (with `CI` set a missing colmap fails it; otherwise it
-//! skips). `failed_init_retries_once` uses a stand-in `colmap` script.
+//! `interrupted_run_resumes` and `sixteen_bit_images_are_read_through_8_bit_copies`
+//! run real COLMAP 3.8 on frames of the small built-in scene (with `CI` set a
+//! missing colmap fails them; otherwise they skip); the others use a
+//! stand-in `colmap` script.
 
 #![allow(clippy::unwrap_used, clippy::expect_used)]
 
@@ -253,4 +255,83 @@ fn images_of_several_sizes_get_one_camera_each() {
             .any(|n| n.contains("2 sizes (8×6, 6×8): one camera per image")),
         "{notes:?}"
     );
+}
+
+/// Frames of a 10-bit video or 16-bit scans: COLMAP 3.8 cannot read
+/// 16-bit PNGs, so the stage gives it 8-bit copies under the same names.
+#[test]
+fn sixteen_bit_images_are_read_through_8_bit_copies() {
+    if !colmap_available() {
+        return;
+    }
+    let d = tempfile::tempdir().unwrap();
+    let scene = small_frames(d.path(), 8);
+    let images = scene.join("images");
+    for i in 0..8 {
+        let p = images.join(format!("{i:05}.png"));
+        let deep: image::ImageBuffer<image::Rgb<u16>, Vec<u16>> =
+            image::DynamicImage::ImageRgb8(image::open(&p).unwrap().to_rgb8()).into_rgb16();
+        deep.save(&p).unwrap();
+    }
+    assert_eq!(
+        image::open(images.join("00000.png")).unwrap().color(),
+        image::ColorType::Rgb16
+    );
+    let paths = ColmapPaths::for_scene(&scene);
+    let opts = ColmapOptions {
+        use_masks: false,
+        overlap: 3,
+        undistort: false,
+        camera_model: loader::CameraModel::PINHOLE,
+        mapper: MapperOptions::video(),
+        ..ColmapOptions::default()
+    };
+    let mut notes = Vec::new();
+    let r = run_colmap(&paths, &opts, &mut |p| {
+        if let Progress::Note { message, .. } = p {
+            notes.push(message);
+        }
+    })
+    .unwrap();
+    assert!(r.registered >= 6, "{} of 8 registered", r.registered);
+    assert!(
+        notes
+            .iter()
+            .any(|n| n.starts_with("8 of 8 images have more than 8 bits")),
+        "{notes:?}"
+    );
+    let copy = paths.work.join("images_8bit/00003.png");
+    assert_eq!(image::open(&copy).unwrap().color(), image::ColorType::Rgb8);
+    // The originals are untouched.
+    assert_eq!(
+        image::open(images.join("00003.png")).unwrap().color(),
+        image::ColorType::Rgb16
+    );
+}
+
+/// COLMAP exits 0 when it cannot read an image; the stage names the image
+/// instead of letting the matcher abort on an empty database.
+#[test]
+fn images_colmap_cannot_read_are_named() {
+    let d = tempfile::tempdir().unwrap();
+    let scene = grey_images(d.path(), &[(8, 6); 3]);
+    let colmap = stand_in_colmap(
+        d.path(),
+        "feature_extractor) for n in a b c; do echo \"Processed file [1/3]\"; echo \"  Name:            $n.png\"; echo \"  ERROR: Failed to read image file format.\"; done ;;\n  sequential_matcher) exit 134 ;;",
+    );
+    let opts = ColmapOptions {
+        colmap,
+        use_masks: false,
+        ..ColmapOptions::default()
+    };
+    let e = run_colmap(&ColmapPaths::for_scene(&scene), &opts, &mut |_| {})
+        .unwrap_err()
+        .to_string();
+    assert!(
+        e.starts_with("COLMAP could not read 3 of 3 images in ")
+            && e.contains("(first a.png: Failed to read image file format.)")
+            && e.contains("feature_extractor.log"),
+        "{e}"
+    );
+    assert!(!e.contains('\n'), "{e}");
 }
