@@ -6,9 +6,10 @@
 //! (a phone's HDR HEVC) would otherwise give 16-bit PNGs, which COLMAP 3.8
 //! cannot read (its feature extractor skips them with "Failed to read image
 //! file format"); HDR values are converted, not tone mapped. Without `fps`
-//! every decoded frame is written once (`-fps_mode passthrough`): a phone's
-//! variable-frame-rate video would otherwise get duplicated frames wherever
-//! its frame interval grows.
+//! every decoded frame is written once (`-fps_mode passthrough`, `-vsync
+//! passthrough` on an ffmpeg before 5.1): a phone's variable-frame-rate
+//! video would otherwise get duplicated frames wherever its frame interval
+//! grows.
 
 use crate::error::{LoaderError, Result};
 use std::path::{Path, PathBuf};
@@ -96,23 +97,16 @@ pub fn extract_frames_with(
 }
 
 fn run_ffmpeg(program: &str, video: &Path, out: &Path, fps: Option<f64>) -> Result<()> {
-    let mut cmd = Command::new(program);
-    cmd.args(["-hide_banner", "-loglevel", "error", "-nostdin", "-y", "-i"])
-        .arg(video);
-    match fps {
-        Some(f) => cmd.arg("-vf").arg(format!("fps={f}")),
-        None => cmd.args(["-fps_mode", "passthrough"]),
+    let output = ffmpeg_frames(program, video, out, fps, "-fps_mode")?;
+    // ffmpeg before 5.1 has no -fps_mode; its -vsync (deprecated since)
+    // takes the same value.
+    let output = if !output.status.success()
+        && String::from_utf8_lossy(&output.stderr).contains("Unrecognized option 'fps_mode'")
+    {
+        ffmpeg_frames(program, video, out, fps, "-vsync")?
+    } else {
+        output
     };
-    cmd.args(["-pix_fmt", "rgb24"]).arg(out.join(FRAME_PATTERN));
-    let output = cmd.output().map_err(|e| {
-        if e.kind() == std::io::ErrorKind::NotFound {
-            LoaderError::External(format!(
-                "{program} not found on PATH; install it (Debian/Ubuntu: apt-get install -y ffmpeg)"
-            ))
-        } else {
-            LoaderError::External(format!("could not run {program}: {e}"))
-        }
-    })?;
     if !output.status.success() {
         let err = String::from_utf8_lossy(&output.stderr);
         let lines: Vec<&str> = err.lines().filter(|l| !l.trim().is_empty()).collect();
@@ -124,6 +118,34 @@ fn run_ffmpeg(program: &str, video: &Path, out: &Path, fps: Option<f64>) -> Resu
         )));
     }
     Ok(())
+}
+
+/// One ffmpeg run writing `video`'s frames into `out`; without `fps` each
+/// decoded frame once, through `sync_option` (`-fps_mode` or `-vsync`).
+fn ffmpeg_frames(
+    program: &str,
+    video: &Path,
+    out: &Path,
+    fps: Option<f64>,
+    sync_option: &str,
+) -> Result<std::process::Output> {
+    let mut cmd = Command::new(program);
+    cmd.args(["-hide_banner", "-loglevel", "error", "-nostdin", "-y", "-i"])
+        .arg(video);
+    match fps {
+        Some(f) => cmd.arg("-vf").arg(format!("fps={f}")),
+        None => cmd.args([sync_option, "passthrough"]),
+    };
+    cmd.args(["-pix_fmt", "rgb24"]).arg(out.join(FRAME_PATTERN));
+    cmd.output().map_err(|e| {
+        if e.kind() == std::io::ErrorKind::NotFound {
+            LoaderError::External(format!(
+                "{program} not found on PATH; install it (Debian/Ubuntu: apt-get install -y ffmpeg)"
+            ))
+        } else {
+            LoaderError::External(format!("could not run {program}: {e}"))
+        }
+    })
 }
 
 /// The video's frame rate from `ffprobe` (next to `program`), or `None`
@@ -265,6 +287,21 @@ mod tests {
             &["-t", "3", "-fps_mode", "passthrough"],
         );
         let frames = extract_frames(&v, dir.path().join("vfr"), None).unwrap();
+        assert_eq!(frames.len(), 10);
+        // An ffmpeg older than 5.1 refuses -fps_mode; -vsync does the same.
+        let old = dir.path().join("ffmpeg");
+        std::fs::write(
+            &old,
+            "#!/bin/sh\nfor a in \"$@\"; do [ \"$a\" = -fps_mode ] && { echo \"Unrecognized option 'fps_mode'.\" >&2; exit 1; }; done\nexec ffmpeg \"$@\"\n",
+        )
+        .unwrap();
+        #[cfg(unix)]
+        {
+            use std::os::unix::fs::PermissionsExt;
+            std::fs::set_permissions(&old, std::fs::Permissions::from_mode(0o755)).unwrap();
+        }
+        let frames =
+            extract_frames_with(old.to_str().unwrap(), &v, &dir.path().join("old"), None).unwrap();
         assert_eq!(frames.len(), 10);
     }
 
