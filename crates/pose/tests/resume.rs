@@ -40,6 +40,19 @@ fn small_frames(dir: &Path, n: usize) -> PathBuf {
     scene
 }
 
+/// Real COLMAP on a few small-scene frames: no masks, pinhole, the video
+/// mapper preset, overlap 3, no undistortion.
+fn small_scene_options() -> ColmapOptions {
+    ColmapOptions {
+        use_masks: false,
+        overlap: 3,
+        undistort: false,
+        camera_model: loader::CameraModel::PINHOLE,
+        mapper: MapperOptions::video(),
+        ..ColmapOptions::default()
+    }
+}
+
 /// `dir/scene/images/{a,b,c,…}.png`, black, of the given sizes.
 fn grey_images(dir: &Path, sizes: &[(u32, u32)]) -> PathBuf {
     let scene = dir.join("scene");
@@ -85,14 +98,7 @@ fn interrupted_run_resumes() {
     let d = tempfile::tempdir().unwrap();
     let scene = small_frames(d.path(), 10);
     let paths = ColmapPaths::for_scene(&scene);
-    let opts = ColmapOptions {
-        use_masks: false,
-        overlap: 3,
-        undistort: false,
-        camera_model: loader::CameraModel::PINHOLE,
-        mapper: MapperOptions::video(),
-        ..ColmapOptions::default()
-    };
+    let opts = small_scene_options();
 
     // 1. Killed during matching, after the third image's pairs.
     let cancel = AtomicBool::new(false);
@@ -278,14 +284,7 @@ fn sixteen_bit_images_are_read_through_8_bit_copies() {
         image::ColorType::Rgb16
     );
     let paths = ColmapPaths::for_scene(&scene);
-    let opts = ColmapOptions {
-        use_masks: false,
-        overlap: 3,
-        undistort: false,
-        camera_model: loader::CameraModel::PINHOLE,
-        mapper: MapperOptions::video(),
-        ..ColmapOptions::default()
-    };
+    let opts = small_scene_options();
     let mut notes = Vec::new();
     let r = run_colmap(&paths, &opts, &mut |p| {
         if let Progress::Note { message, .. } = p {
