@@ -9,7 +9,7 @@
 //! every decoded frame is written once (`-fps_mode passthrough`, `-vsync
 //! passthrough` on an ffmpeg before 5.1): a phone's variable-frame-rate
 //! video would otherwise get duplicated frames wherever its frame interval
-//! grows.
+//! grows. Anamorphic frames are widened to square pixels.
 
 use crate::error::{LoaderError, Result};
 use std::path::{Path, PathBuf};
@@ -17,6 +17,11 @@ use std::process::Command;
 
 /// Frames are written as `out_dir/images/%05d.png`, numbered from 00001.
 pub const FRAME_PATTERN: &str = "%05d.png";
+
+/// ffmpeg filters that widen an anamorphic video's frames to square pixels
+/// (width × sample aspect ratio; a no-op at 1:1 or an unknown ratio): the
+/// pose stage's camera models have one focal length for both axes.
+const SQUARE_PIXELS: &str = "scale='if(gt(sar,0)*not(eq(sar,1)),round(iw*sar),iw)':ih,setsar=1";
 
 /// Extract every frame (or `fps` frames per second) of `video` into
 /// `out_dir/images/`. Frames are decoded into a temp folder next to it and
@@ -132,10 +137,14 @@ fn ffmpeg_frames(
     let mut cmd = Command::new(program);
     cmd.args(["-hide_banner", "-loglevel", "error", "-nostdin", "-y", "-i"])
         .arg(video);
-    match fps {
-        Some(f) => cmd.arg("-vf").arg(format!("fps={f}")),
-        None => cmd.args([sync_option, "passthrough"]),
+    let filters = match fps {
+        Some(f) => format!("fps={f},{SQUARE_PIXELS}"),
+        None => {
+            cmd.args([sync_option, "passthrough"]);
+            SQUARE_PIXELS.to_string()
+        }
     };
+    cmd.arg("-vf").arg(filters);
     cmd.args(["-pix_fmt", "rgb24"]).arg(out.join(FRAME_PATTERN));
     cmd.output().map_err(|e| {
         if e.kind() == std::io::ErrorKind::NotFound {
@@ -260,10 +269,11 @@ mod tests {
         assert!(e.contains("images") && e.contains("not empty"), "{e}");
     }
 
-    /// A 16-bit video gives 8-bit RGB frames (COLMAP reads no others), and
-    /// a variable-frame-rate video one frame per decoded frame.
+    /// A 16-bit video gives 8-bit RGB frames (COLMAP reads no others), an
+    /// anamorphic one square pixels, and a variable-frame-rate video one
+    /// frame per decoded frame.
     #[test]
-    fn deep_and_variable_rate_videos_give_one_8_bit_frame_per_frame() {
+    fn deep_anamorphic_and_variable_rate_videos_give_one_8_bit_square_frame_per_frame() {
         if !need_ffmpeg() {
             return;
         }
@@ -278,6 +288,17 @@ mod tests {
         assert_eq!(frames.len(), 10);
         let img = image::open(&frames[3]).unwrap();
         assert_eq!(img.color(), image::ColorType::Rgb8);
+        // Anamorphic (4:3 pixels): widened to square pixels, at every rate.
+        let v = make_video_as(
+            dir.path(),
+            "ana.mkv",
+            "testsrc=size=60x48:rate=10,setsar=4/3",
+            &[],
+        );
+        for (name, fps) in [("ana", None), ("ana5", Some(5.0))] {
+            let frames = extract_frames(&v, dir.path().join(name), fps).unwrap();
+            assert_eq!(image::image_dimensions(&frames[0]).unwrap(), (80, 48));
+        }
         // Frames 5–9 a second later than their place at 10 fps: 10 frames
         // over 1.9 s, which a constant-rate output pads to 20.
         let v = make_video_as(
