@@ -521,17 +521,43 @@ impl Runner<'_> {
     }
 }
 
-/// The distinct pixel sizes of `dir/<name>` over `names`, in order of first
-/// appearance (read from the file headers).
-fn distinct_sizes(dir: &Path, names: &[String]) -> Result<Vec<(u32, u32)>> {
+/// One image's header: (width, height) and bits per channel, or why the
+/// `image` crate could not read it.
+type Header = std::result::Result<((u32, u32), u16), String>;
+
+/// The headers of `dir/<name>` over `names`, read once for the checks
+/// below.
+fn image_headers(dir: &Path, names: &[String]) -> Vec<Header> {
+    use image::ImageDecoder;
+    names
+        .iter()
+        .map(|n| {
+            let decoder = image::ImageReader::open(dir.join(n))
+                .map_err(|e| e.to_string())?
+                .with_guessed_format()
+                .map_err(|e| e.to_string())?
+                .into_decoder()
+                .map_err(|e| e.to_string())?;
+            let colour = decoder.color_type();
+            let bits = colour.bits_per_pixel() / u16::from(colour.channel_count()).max(1);
+            Ok((decoder.dimensions(), bits))
+        })
+        .collect()
+}
+
+/// The distinct pixel sizes over `headers` (of `dir/<name>` over `names`),
+/// in order of first appearance.
+fn distinct_sizes(dir: &Path, names: &[String], headers: &[Header]) -> Result<Vec<(u32, u32)>> {
     let mut sizes: Vec<(u32, u32)> = Vec::new();
-    for n in names {
-        let p = dir.join(n);
-        let d = image::image_dimensions(&p).map_err(|e| {
-            PoseError::Invalid(format!("{}: cannot read the image size: {e}", p.display()))
+    for (n, h) in names.iter().zip(headers) {
+        let (d, _) = h.as_ref().map_err(|e| {
+            PoseError::Invalid(format!(
+                "{}: cannot read the image size: {e}",
+                dir.join(n).display()
+            ))
         })?;
-        if !sizes.contains(&d) {
-            sizes.push(d);
+        if !sizes.contains(d) {
+            sizes.push(*d);
         }
     }
     Ok(sizes)
@@ -540,20 +566,6 @@ fn distinct_sizes(dir: &Path, names: &[String]) -> Result<Vec<(u32, u32)>> {
 /// Folder under the work folder that holds 8-bit copies for COLMAP.
 const EIGHT_BIT_DIR: &str = "images_8bit";
 
-/// Bits per channel of `path`'s pixels, read from its header; `None` when
-/// the `image` crate cannot read the header (COLMAP is left to try).
-fn bits_per_channel(path: &Path) -> Option<u16> {
-    use image::ImageDecoder;
-    let colour = image::ImageReader::open(path)
-        .ok()?
-        .with_guessed_format()
-        .ok()?
-        .into_decoder()
-        .ok()?
-        .color_type();
-    Some(colour.bits_per_pixel() / u16::from(colour.channel_count()).max(1))
-}
-
 /// COLMAP 3.8 reads 8-bit images only: FreeImage cannot convert 16-bit PNG
 /// or TIFF pixels, so the feature extractor skips such an image ("Failed to
 /// read image file format") and leaves it out. When any of `names` has more
@@ -561,16 +573,17 @@ fn bits_per_channel(path: &Path) -> Option<u16> {
 /// copy of each such image under its own name (and format) and a link to
 /// each other image, and returned with the number of copies; `None` when
 /// every image is 8-bit. Image names, and so the masks and the model, are
-/// unchanged.
+/// unchanged. An image whose header cannot be read is left to COLMAP.
 fn eight_bit_images(
     images: &Path,
     names: &[String],
+    headers: &[Header],
     work: &Path,
 ) -> Result<Option<(PathBuf, usize)>> {
-    let mut deep = Vec::new();
-    for n in names {
-        deep.push(bits_per_channel(&images.join(n)).is_some_and(|b| b > 8));
-    }
+    let deep: Vec<bool> = headers
+        .iter()
+        .map(|h| h.as_ref().is_ok_and(|(_, bits)| *bits > 8))
+        .collect();
     let copies = deep.iter().filter(|d| **d).count();
     if copies == 0 {
         return Ok(None);
@@ -735,9 +748,10 @@ pub fn run_colmap_cancellable(
     let t0 = Instant::now();
     let version = colmap_version(&opts.colmap)?;
     let names = selected_images(paths, opts)?;
+    let headers = image_headers(&paths.images, &names);
     // Only a shared camera needs one size.
     let sizes = if opts.single_camera {
-        distinct_sizes(&paths.images, &names)?
+        distinct_sizes(&paths.images, &names, &headers)?
     } else {
         Vec::new()
     };
@@ -757,7 +771,7 @@ pub fn run_colmap_cancellable(
     let state_path = paths.work.join("resume.json");
     let (feature_key, match_key) = resume_keys(paths, opts, &names, &version)?;
     // COLMAP reads 8-bit copies of deeper images; keys stay on the originals.
-    let eight_bit = eight_bit_images(&paths.images, &names, &paths.work)?;
+    let eight_bit = eight_bit_images(&paths.images, &names, &headers, &paths.work)?;
     let staged;
     let paths = match &eight_bit {
         Some((dir, _)) => {

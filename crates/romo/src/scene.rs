@@ -345,23 +345,25 @@ struct Subset<'a> {
     idx: &'a [usize],
 }
 
+impl Subset<'_> {
+    /// `src`'s index of frame `i`.
+    fn at(&self, i: usize) -> Result<usize> {
+        self.idx
+            .get(i)
+            .copied()
+            .ok_or_else(|| RomoError::Input(format!("frame {i} out of range")))
+    }
+}
+
 impl FrameSource for Subset<'_> {
     fn len(&self) -> usize {
         self.idx.len()
     }
     fn frame(&self, i: usize) -> Result<Rgb> {
-        let k = *self
-            .idx
-            .get(i)
-            .ok_or_else(|| RomoError::Input(format!("frame {i} out of range")))?;
-        self.src.frame(k)
+        self.src.frame(self.at(i)?)
     }
     fn size(&self, i: usize) -> Result<(usize, usize)> {
-        let k = *self
-            .idx
-            .get(i)
-            .ok_or_else(|| RomoError::Input(format!("frame {i} out of range")))?;
-        self.src.size(k)
+        self.src.size(self.at(i)?)
     }
     fn describe(&self, i: usize) -> String {
         self.idx
