@@ -128,8 +128,10 @@ pub fn ffprobe_for(ffmpeg: &Path) -> PathBuf {
     }
 }
 
-/// Size, frame count (packets counted, so containers without a frame count
-/// work too) and frame rate of `video`'s first stream.
+/// Size of the frames extraction writes (a rotated phone video's display
+/// orientation, anamorphic pixels widened, as `loader::video` does), frame
+/// count (packets counted, so containers without a frame count work too)
+/// and frame rate of `video`'s first stream.
 pub fn probe_video(ffmpeg: &Path, video: &Path) -> anyhow::Result<VideoInfo> {
     let ffprobe = ffprobe_for(ffmpeg);
     let out = std::process::Command::new(&ffprobe)
@@ -140,7 +142,7 @@ pub fn probe_video(ffmpeg: &Path, video: &Path) -> anyhow::Result<VideoInfo> {
             "v:0",
             "-count_packets",
             "-show_entries",
-            "stream=width,height,avg_frame_rate,nb_read_packets",
+            "stream=width,height,sample_aspect_ratio,avg_frame_rate,nb_read_packets:stream_side_data=rotation:stream_tags=rotate",
             "-of",
             "default=noprint_wrappers=1",
         ])
@@ -166,6 +168,22 @@ pub fn probe_video(ffmpeg: &Path, video: &Path) -> anyhow::Result<VideoInfo> {
     });
     match (num("width"), num("height"), num("nb_read_packets")) {
         (Some(w), Some(h), Some(n)) if out.status.success() && w > 0 && h > 0 && n > 0 => {
+            let sar = field("sample_aspect_ratio").and_then(|r| {
+                let (n, d) = r.split_once(':')?;
+                let (n, d) = (n.parse::<f64>().ok()?, d.parse::<f64>().ok()?);
+                (n > 0.0 && d > 0.0).then(|| n / d)
+            });
+            let w = match sar {
+                Some(r) => ((w as f64 * r).round() as u64).max(1),
+                None => w,
+            };
+            // ffmpeg turns the frames upright: a quarter turn swaps the sides.
+            let quarter = ["rotation", "TAG:rotate"].iter().any(|k| {
+                field(k)
+                    .and_then(|v| v.parse::<f64>().ok())
+                    .is_some_and(|deg| (deg.abs() / 90.0).round() as i64 % 2 == 1)
+            });
+            let (w, h) = if quarter { (h, w) } else { (w, h) };
             Ok(VideoInfo {
                 width: w as u32,
                 height: h as u32,
@@ -664,6 +682,47 @@ mod tests {
     /// 0.05 s a step plus 0.5 µs a pixel: 240×135 → 0.066 s a step.
     fn rates() -> Rates {
         Rates::measured(0.05, 0.5e-6, 1.0)
+    }
+
+    /// The plan sees the frames' size as extraction writes them: a phone
+    /// video stored sideways with a rotation tag, and anamorphic pixels.
+    #[test]
+    fn video_size_is_the_extracted_frames_size() {
+        if !loader::video::ffmpeg_available() {
+            assert!(
+                std::env::var_os("CI").is_none(),
+                "CI is set but ffmpeg is missing"
+            );
+            return;
+        }
+        let dir = tempfile::tempdir().unwrap();
+        for (name, filters, extra) in [
+            ("plain.mp4", "null", &[][..]),
+            ("rotated.mp4", "null", &["-metadata:s:v:0", "rotate=90"][..]),
+            ("anamorphic.mp4", "setsar=4/3", &[][..]),
+        ] {
+            let v = dir.path().join(name);
+            let st = std::process::Command::new("ffmpeg")
+                .args(["-hide_banner", "-loglevel", "error", "-nostdin", "-y"])
+                .args(["-f", "lavfi", "-i", "testsrc=size=64x48:rate=10:duration=1"])
+                .args(["-vf", filters, "-c:v", "mpeg4"])
+                .args(extra)
+                .arg(&v)
+                .status()
+                .unwrap();
+            assert!(st.success());
+            let info = probe_video(Path::new("ffmpeg"), &v).unwrap();
+            let frames =
+                loader::video::extract_frames(&v, dir.path().join(name).with_extension(""), None)
+                    .unwrap()
+                    .frames;
+            assert_eq!(info.frames, frames.len(), "{name}");
+            assert_eq!(
+                (info.width, info.height),
+                image::image_dimensions(&frames[0]).unwrap(),
+                "{name}"
+            );
+        }
     }
 
     #[test]

@@ -5,7 +5,9 @@
 //! Frames are 8-bit RGB whatever the video's pixel format: a 10-bit video
 //! (a phone's HDR HEVC) would otherwise give 16-bit PNGs, which COLMAP 3.8
 //! cannot read (its feature extractor skips them with "Failed to read image
-//! file format"); HDR values are converted, not tone mapped. Without `fps`
+//! file format"). An HDR video (PQ or HLG transfer, as phones record) is
+//! tone mapped to SDR BT.709 ([`Hdr`]): read as SDR its frames are washed
+//! out and dim (BT.2020 colours taken for BT.709 ones). Without `fps`
 //! every decoded frame is written once (`-fps_mode passthrough`, `-vsync
 //! passthrough` on an ffmpeg before 5.1): a phone's variable-frame-rate
 //! video would otherwise get duplicated frames wherever its frame interval
@@ -23,15 +25,76 @@ pub const FRAME_PATTERN: &str = "%05d.png";
 /// pose stage's camera models have one focal length for both axes.
 const SQUARE_PIXELS: &str = "scale='if(gt(sar,0)*not(eq(sar,1)),round(iw*sar),iw)':ih,setsar=1";
 
+/// SDR white in an HDR signal, nits (ITU-R BT.2408's HDR reference white):
+/// it becomes the frames' white.
+pub const HDR_REFERENCE_WHITE_NITS: f64 = 203.0;
+/// Peak assumed when an HDR stream carries no light-level metadata, nits
+/// (HLG's nominal display peak in ITU-R BT.2100, and HDR10's usual grade).
+pub const HDR_DEFAULT_PEAK_NITS: f64 = 1000.0;
+
+/// How an HDR video's frames were brought to 8-bit SDR.
+#[derive(Debug, Clone, PartialEq)]
+pub struct Hdr {
+    /// `"PQ"` (SMPTE ST 2084: HDR10, Dolby Vision) or `"HLG"` (ARIB
+    /// STD-B67).
+    pub transfer: &'static str,
+    /// Brightest level kept, nits: the stream's MaxCLL, else its mastering
+    /// display's peak, else [`HDR_DEFAULT_PEAK_NITS`]; at least
+    /// [`HDR_REFERENCE_WHITE_NITS`].
+    pub peak_nits: f64,
+    /// False when this ffmpeg has no `zscale` (libzimg) or `tonemap`
+    /// filter: the frames were then converted as if SDR.
+    pub tone_mapped: bool,
+}
+
+impl Hdr {
+    /// One line for the user.
+    pub fn describe(&self) -> String {
+        if self.tone_mapped {
+            format!(
+                "HDR video ({}, peak {:.0} nits): tone mapped to SDR BT.709 (reference white {HDR_REFERENCE_WHITE_NITS:.0} nits as white, Möbius roll-off above)",
+                self.transfer, self.peak_nits
+            )
+        } else {
+            format!(
+                "warning: HDR video ({}) but this ffmpeg has no zscale/tonemap filter (built without libzimg): frames converted without tone mapping, with washed-out colours",
+                self.transfer
+            )
+        }
+    }
+
+    /// ffmpeg filters from the decoded HDR frames to SDR BT.709: linear
+    /// light with the reference white at 1, BT.2020 → BT.709 primaries,
+    /// ffmpeg's Möbius curve (linear below its knee, rolled off up to the
+    /// peak; one curve for the whole video, so frames stay photometrically
+    /// consistent), BT.709 transfer.
+    fn filters(&self) -> String {
+        format!(
+            "zscale=t=linear:npl={w},format=gbrpf32le,zscale=p=bt709,tonemap=mobius:desat=0:peak={p:.4},zscale=t=bt709:m=bt709:r=tv,format=gbrp",
+            w = HDR_REFERENCE_WHITE_NITS,
+            p = self.peak_nits / HDR_REFERENCE_WHITE_NITS
+        )
+    }
+}
+
+/// What [`extract_frames`] wrote.
+#[derive(Debug, Clone)]
+pub struct Extraction {
+    /// Frame paths in order.
+    pub frames: Vec<PathBuf>,
+    /// Set for an HDR video.
+    pub hdr: Option<Hdr>,
+}
+
 /// Extract every frame (or `fps` frames per second) of `video` into
 /// `out_dir/images/`. Frames are decoded into a temp folder next to it and
 /// renamed into place when ffmpeg succeeds; an existing non-empty `images/`
-/// is an error (never overwritten). Returns the frame paths in order.
+/// is an error (never overwritten).
 pub fn extract_frames(
     video: impl AsRef<Path>,
     out_dir: impl AsRef<Path>,
     fps: Option<f64>,
-) -> Result<Vec<PathBuf>> {
+) -> Result<Extraction> {
     extract_frames_with("ffmpeg", video.as_ref(), out_dir.as_ref(), fps)
 }
 
@@ -41,7 +104,7 @@ pub fn extract_frames_with(
     video: &Path,
     out_dir: &Path,
     fps: Option<f64>,
-) -> Result<Vec<PathBuf>> {
+) -> Result<Extraction> {
     if let Some(f) = fps
         && !(f.is_finite() && f > 0.0)
     {
@@ -76,9 +139,11 @@ pub fn extract_frames_with(
             "already exists and is not empty; choose another --out",
         ));
     }
+    let hdr = hdr_of(program, video);
     let tmp = out_dir.join(format!(".images.tmp.{}", std::process::id()));
     std::fs::create_dir_all(&tmp).map_err(|e| LoaderError::io(&tmp, e))?;
-    let result = run_ffmpeg(program, video, &tmp, fps);
+    let tone_map = hdr.as_ref().filter(|h| h.tone_mapped).map(Hdr::filters);
+    let result = run_ffmpeg(program, video, &tmp, fps, tone_map.as_deref());
     let result = result.and_then(|()| {
         if images.is_dir() {
             std::fs::remove_dir(&images).map_err(|e| LoaderError::io(&images, e))?;
@@ -93,7 +158,7 @@ pub fn extract_frames_with(
         if v.is_empty() {
             return Err(LoaderError::format(video, "ffmpeg produced no frames"));
         }
-        Ok(v)
+        Ok(Extraction { frames: v, hdr })
     });
     if result.is_err() {
         let _ = std::fs::remove_dir_all(&tmp);
@@ -101,14 +166,20 @@ pub fn extract_frames_with(
     result
 }
 
-fn run_ffmpeg(program: &str, video: &Path, out: &Path, fps: Option<f64>) -> Result<()> {
-    let output = ffmpeg_frames(program, video, out, fps, "-fps_mode")?;
+fn run_ffmpeg(
+    program: &str,
+    video: &Path,
+    out: &Path,
+    fps: Option<f64>,
+    tone_map: Option<&str>,
+) -> Result<()> {
+    let output = ffmpeg_frames(program, video, out, fps, tone_map, "-fps_mode")?;
     // ffmpeg before 5.1 has no -fps_mode; its -vsync (deprecated since)
     // takes the same value.
     let output = if !output.status.success()
         && String::from_utf8_lossy(&output.stderr).contains("Unrecognized option 'fps_mode'")
     {
-        ffmpeg_frames(program, video, out, fps, "-vsync")?
+        ffmpeg_frames(program, video, out, fps, tone_map, "-vsync")?
     } else {
         output
     };
@@ -126,25 +197,29 @@ fn run_ffmpeg(program: &str, video: &Path, out: &Path, fps: Option<f64>) -> Resu
 }
 
 /// One ffmpeg run writing `video`'s frames into `out`; without `fps` each
-/// decoded frame once, through `sync_option` (`-fps_mode` or `-vsync`).
+/// decoded frame once, through `sync_option` (`-fps_mode` or `-vsync`);
+/// `tone_map` filters first when given.
 fn ffmpeg_frames(
     program: &str,
     video: &Path,
     out: &Path,
     fps: Option<f64>,
+    tone_map: Option<&str>,
     sync_option: &str,
 ) -> Result<std::process::Output> {
     let mut cmd = Command::new(program);
     cmd.args(["-hide_banner", "-loglevel", "error", "-nostdin", "-y", "-i"])
         .arg(video);
-    let filters = match fps {
-        Some(f) => format!("fps={f},{SQUARE_PIXELS}"),
+    let mut filters: Vec<String> = Vec::new();
+    match fps {
+        Some(f) => filters.push(format!("fps={f}")),
         None => {
             cmd.args([sync_option, "passthrough"]);
-            SQUARE_PIXELS.to_string()
         }
-    };
-    cmd.arg("-vf").arg(filters);
+    }
+    filters.extend(tone_map.map(str::to_string));
+    filters.push(SQUARE_PIXELS.to_string());
+    cmd.arg("-vf").arg(filters.join(","));
     cmd.args(["-pix_fmt", "rgb24"]).arg(out.join(FRAME_PATTERN));
     cmd.output().map_err(|e| {
         if e.kind() == std::io::ErrorKind::NotFound {
@@ -157,15 +232,96 @@ fn ffmpeg_frames(
     })
 }
 
+/// `ffprobe` next to `program` (or on PATH).
+fn ffprobe_of(program: &str) -> String {
+    match program.strip_suffix("ffmpeg") {
+        Some(prefix) => format!("{prefix}ffprobe"),
+        None => "ffprobe".into(),
+    }
+}
+
+/// The video's HDR transfer and peak from its first frame (`ffprobe`), and
+/// whether `program` can tone map it; `None` for SDR, or when ffprobe is
+/// missing (the frames are then converted as SDR).
+fn hdr_of(program: &str, video: &Path) -> Option<Hdr> {
+    let out = Command::new(ffprobe_of(program))
+        .args([
+            "-v",
+            "error",
+            "-select_streams",
+            "v:0",
+            "-read_intervals",
+            "%+#1",
+        ])
+        .args([
+            "-show_entries",
+            "stream=color_transfer:frame=color_transfer:frame_side_data=max_content,max_luminance",
+        ])
+        .args(["-of", "default=noprint_wrappers=1"])
+        .arg(video)
+        .output()
+        .ok()?;
+    if !out.status.success() {
+        return None;
+    }
+    let (transfer, peak_nits) = parse_hdr(&String::from_utf8_lossy(&out.stdout))?;
+    Some(Hdr {
+        transfer,
+        peak_nits,
+        tone_mapped: has_tone_mapping(program),
+    })
+}
+
+/// HDR transfer and peak (nits) from ffprobe's `key=value` lines
+/// (`color_transfer`, `max_content` = MaxCLL, `max_luminance` = the
+/// mastering display's peak as a fraction); `None` for an SDR transfer.
+fn parse_hdr(text: &str) -> Option<(&'static str, f64)> {
+    let value = |key: &str| {
+        text.lines()
+            .filter_map(|l| l.trim().strip_prefix(key)?.strip_prefix('='))
+            .map(str::trim)
+            .collect::<Vec<_>>()
+    };
+    let transfer = value("color_transfer").into_iter().find_map(|t| match t {
+        "smpte2084" => Some("PQ"),
+        "arib-std-b67" => Some("HLG"),
+        _ => None,
+    })?;
+    let number = |v: &str| -> Option<f64> {
+        let x = match v.split_once('/') {
+            Some((n, d)) => n.parse::<f64>().ok()? / d.parse::<f64>().ok()?,
+            None => v.parse().ok()?,
+        };
+        (x.is_finite() && x > 0.0).then_some(x)
+    };
+    let peak = value("max_content")
+        .into_iter()
+        .find_map(number)
+        .or_else(|| value("max_luminance").into_iter().find_map(number))
+        .unwrap_or(HDR_DEFAULT_PEAK_NITS);
+    Some((transfer, peak.max(HDR_REFERENCE_WHITE_NITS)))
+}
+
+/// True when `program` lists the `zscale` and `tonemap` filters.
+fn has_tone_mapping(program: &str) -> bool {
+    Command::new(program)
+        .args(["-hide_banner", "-filters"])
+        .output()
+        .is_ok_and(|o| {
+            let text = String::from_utf8_lossy(&o.stdout);
+            let has = |name: &str| {
+                text.lines()
+                    .any(|l| l.split_whitespace().nth(1) == Some(name))
+            };
+            o.status.success() && has("zscale") && has("tonemap")
+        })
+}
+
 /// The video's frame rate from `ffprobe` (next to `program`), or `None`
 /// when ffprobe is missing or reports none (the check is then skipped and
 /// ffmpeg has the last word).
 fn video_frame_rate(program: &str, video: &Path) -> Option<f64> {
-    let probe = match program.strip_suffix("ffmpeg") {
-        Some(prefix) => format!("{prefix}ffprobe"),
-        None => "ffprobe".into(),
-    };
-    let out = Command::new(probe)
+    let out = Command::new(ffprobe_of(program))
         .args(["-v", "error", "-select_streams", "v:0"])
         .args(["-show_entries", "stream=avg_frame_rate,r_frame_rate"])
         .args(["-of", "default=noprint_wrappers=1:nokey=1"])
@@ -249,11 +405,15 @@ mod tests {
         let dir = tempfile::tempdir().unwrap();
         let v = make_video(dir.path());
         let out = dir.path().join("all");
-        let frames = extract_frames(&v, &out, None).unwrap();
+        let e = extract_frames(&v, &out, None).unwrap();
+        assert_eq!(e.hdr, None);
+        let frames = e.frames;
         assert_eq!(frames.len(), 10);
         assert_eq!(frames[0], out.join("images/00001.png"));
         assert_eq!(image::image_dimensions(&frames[9]).unwrap(), (64, 48));
-        let frames = extract_frames(&v, dir.path().join("slow"), Some(5.0)).unwrap();
+        let frames = extract_frames(&v, dir.path().join("slow"), Some(5.0))
+            .unwrap()
+            .frames;
         assert_eq!(frames.len(), 5);
         // Above the video's 10 fps: refused with the range, nothing written.
         let e = extract_frames(&v, dir.path().join("fast"), Some(1000.0))
@@ -284,7 +444,9 @@ mod tests {
             "testsrc=size=64x48:rate=10",
             &["-pix_fmt", "rgb48le"],
         );
-        let frames = extract_frames(&v, dir.path().join("deep"), None).unwrap();
+        let frames = extract_frames(&v, dir.path().join("deep"), None)
+            .unwrap()
+            .frames;
         assert_eq!(frames.len(), 10);
         let img = image::open(&frames[3]).unwrap();
         assert_eq!(img.color(), image::ColorType::Rgb8);
@@ -296,7 +458,9 @@ mod tests {
             &[],
         );
         for (name, fps) in [("ana", None), ("ana5", Some(5.0))] {
-            let frames = extract_frames(&v, dir.path().join(name), fps).unwrap();
+            let frames = extract_frames(&v, dir.path().join(name), fps)
+                .unwrap()
+                .frames;
             assert_eq!(image::image_dimensions(&frames[0]).unwrap(), (80, 48));
         }
         // Frames 5–9 a second later than their place at 10 fps: 10 frames
@@ -307,23 +471,158 @@ mod tests {
             "testsrc=size=64x48:rate=10:duration=1,setpts='if(lt(N,5),PTS,PTS+1/TB)'",
             &["-t", "3", "-fps_mode", "passthrough"],
         );
-        let frames = extract_frames(&v, dir.path().join("vfr"), None).unwrap();
+        let frames = extract_frames(&v, dir.path().join("vfr"), None)
+            .unwrap()
+            .frames;
         assert_eq!(frames.len(), 10);
         // An ffmpeg older than 5.1 refuses -fps_mode; -vsync does the same.
-        let old = dir.path().join("ffmpeg");
-        std::fs::write(
-            &old,
-            "#!/bin/sh\nfor a in \"$@\"; do [ \"$a\" = -fps_mode ] && { echo \"Unrecognized option 'fps_mode'.\" >&2; exit 1; }; done\nexec ffmpeg \"$@\"\n",
-        )
-        .unwrap();
+        let old = stand_in(
+            dir.path(),
+            "for a in \"$@\"; do [ \"$a\" = -fps_mode ] && { echo \"Unrecognized option 'fps_mode'.\" >&2; exit 1; }; done",
+        );
+        let frames = extract_frames_with(old.to_str().unwrap(), &v, &dir.path().join("old"), None)
+            .unwrap()
+            .frames;
+        assert_eq!(frames.len(), 10);
+    }
+
+    /// An executable `dir/ffmpeg` that runs `script` (sh), then the real
+    /// ffmpeg with the same arguments; the real ffprobe beside it.
+    fn stand_in(dir: &Path, script: &str) -> PathBuf {
+        let path = dir.join("ffmpeg");
+        let probe = dir.join("ffprobe");
+        if !probe.exists() {
+            std::fs::write(&probe, "#!/bin/sh\nexec ffprobe \"$@\"\n").unwrap();
+            #[cfg(unix)]
+            {
+                use std::os::unix::fs::PermissionsExt;
+                std::fs::set_permissions(&probe, std::fs::Permissions::from_mode(0o755)).unwrap();
+            }
+        }
+        std::fs::write(&path, format!("#!/bin/sh\n{script}\nexec ffmpeg \"$@\"\n")).unwrap();
         #[cfg(unix)]
         {
             use std::os::unix::fs::PermissionsExt;
-            std::fs::set_permissions(&old, std::fs::Permissions::from_mode(0o755)).unwrap();
+            std::fs::set_permissions(&path, std::fs::Permissions::from_mode(0o755)).unwrap();
         }
-        let frames =
-            extract_frames_with(old.to_str().unwrap(), &v, &dir.path().join("old"), None).unwrap();
-        assert_eq!(frames.len(), 10);
+        path
+    }
+
+    /// Mean absolute difference of two folders' frames, in 8-bit levels.
+    fn frame_difference(a: &[PathBuf], b: &[PathBuf]) -> f64 {
+        assert_eq!(a.len(), b.len());
+        let (mut sum, mut n) = (0f64, 0usize);
+        for (x, y) in a.iter().zip(b) {
+            let (x, y) = (
+                image::open(x).unwrap().to_rgb8(),
+                image::open(y).unwrap().to_rgb8(),
+            );
+            assert_eq!(x.dimensions(), y.dimensions());
+            for (p, q) in x.as_raw().iter().zip(y.as_raw()) {
+                sum += (f64::from(*p) - f64::from(*q)).abs();
+                n += 1;
+            }
+        }
+        sum / n as f64
+    }
+
+    /// A real PQ and a real HLG video, made from an SDR source with SDR
+    /// white at the reference white (as BT.2408 grades it), come back close
+    /// to the source; read as SDR (an ffmpeg without zscale) they do not.
+    #[test]
+    fn hdr_videos_are_tone_mapped_back_to_their_sdr_source() {
+        if !need_ffmpeg() {
+            return;
+        }
+        if !has_tone_mapping("ffmpeg") {
+            assert!(
+                std::env::var_os("CI").is_none(),
+                "CI is set but ffmpeg has no zscale/tonemap filter"
+            );
+            eprintln!("skipping: ffmpeg without zscale");
+            return;
+        }
+        let dir = tempfile::tempdir().unwrap();
+        let source =
+            "testsrc2=size=64x48:rate=10:duration=1,zscale=tin=bt709:min=bt709:pin=bt709:rin=pc";
+        // The SDR reference through the same 10-bit 4:4:4 YUV stage.
+        let sdr = make_video_as(
+            dir.path(),
+            "sdr.mkv",
+            &format!("{source}:t=bt709:m=bt709:p=bt709:r=tv,format=yuv444p10le"),
+            &[],
+        );
+        let sdr = extract_frames(&sdr, dir.path().join("sdr"), None)
+            .unwrap()
+            .frames;
+        for (trc, name) in [("smpte2084", "PQ"), ("arib-std-b67", "HLG")] {
+            let v = make_video_as(
+                dir.path(),
+                &format!("{trc}.mkv"),
+                &format!(
+                    "{source}:t={trc}:m=bt2020nc:p=bt2020:r=tv:npl={HDR_REFERENCE_WHITE_NITS},format=yuv444p10le"
+                ),
+                &[
+                    "-color_trc",
+                    trc,
+                    "-color_primaries",
+                    "bt2020",
+                    "-colorspace",
+                    "bt2020nc",
+                    "-color_range",
+                    "tv",
+                ],
+            );
+            let e = extract_frames(&v, dir.path().join(trc), None).unwrap();
+            let hdr = e.hdr.clone().unwrap();
+            assert_eq!(
+                (hdr.transfer, hdr.peak_nits, hdr.tone_mapped),
+                (name, HDR_DEFAULT_PEAK_NITS, true)
+            );
+            let mapped = frame_difference(&sdr, &e.frames);
+            // An ffmpeg that lists no zscale: converted as SDR, and said so.
+            let plain = stand_in(
+                dir.path(),
+                "[ \"$2\" = -filters ] && { echo ' ... scale V->V Scale'; exit 0; }",
+            );
+            let e = extract_frames_with(
+                plain.to_str().unwrap(),
+                &v,
+                &dir.path().join(format!("{trc}-plain")),
+                None,
+            )
+            .unwrap();
+            let hdr = e.hdr.unwrap();
+            assert!(!hdr.tone_mapped && hdr.describe().contains("without tone mapping"));
+            let unmapped = frame_difference(&sdr, &e.frames);
+            assert!(
+                mapped < 12.0 && unmapped > 2.0 * mapped,
+                "{trc}: tone mapped {mapped:.1}, as SDR {unmapped:.1} levels off the source"
+            );
+        }
+    }
+
+    /// Peaks from light-level metadata, as ffprobe prints them.
+    #[test]
+    fn hdr_peak_is_read_from_the_stream_metadata() {
+        let probe = "color_transfer=smpte2084\nmax_luminance=40000000/10000\nmax_content=1600\ncolor_transfer=smpte2084\n";
+        assert_eq!(parse_hdr(probe), Some(("PQ", 1600.0)));
+        let probe = "color_transfer=smpte2084\nmax_luminance=40000000/10000\nmax_content=0\n";
+        assert_eq!(parse_hdr(probe), Some(("PQ", 4000.0)));
+        // No metadata: the default; a peak below reference white is raised to it.
+        assert_eq!(
+            parse_hdr("color_transfer=arib-std-b67\n"),
+            Some(("HLG", HDR_DEFAULT_PEAK_NITS))
+        );
+        assert_eq!(
+            parse_hdr("color_transfer=smpte2084\nmax_content=100\n"),
+            Some(("PQ", HDR_REFERENCE_WHITE_NITS))
+        );
+        assert_eq!(
+            parse_hdr("color_transfer=bt709\ncolor_transfer=bt709\n"),
+            None
+        );
+        assert_eq!(parse_hdr("color_transfer=unknown\n"), None);
     }
 
     #[test]

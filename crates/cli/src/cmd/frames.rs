@@ -21,7 +21,11 @@ pub struct Args {
 /// Run `romosplat frames`.
 pub fn run(args: &Args, ctx: &Ctx) -> anyhow::Result<serde_json::Value> {
     ctx.info(format!("extracting frames of {} ...", args.video.display()));
-    let frames = loader::video::extract_frames(&args.video, &args.out, args.fps)?;
+    let extraction = loader::video::extract_frames(&args.video, &args.out, args.fps)?;
+    if let Some(hdr) = &extraction.hdr {
+        ctx.info(hdr.describe());
+    }
+    let frames = extraction.frames;
     let images = args.out.join("images");
     ctx.info(format!(
         "{} frames written to {}",
@@ -33,6 +37,11 @@ pub fn run(args: &Args, ctx: &Ctx) -> anyhow::Result<serde_json::Value> {
         "images_dir": images,
         "frames": frames.len(),
         "fps": args.fps,
+        "hdr": extraction.hdr.as_ref().map(|h| serde_json::json!({
+            "transfer": h.transfer,
+            "peak_nits": h.peak_nits,
+            "tone_mapped": h.tone_mapped,
+        })),
         "first": frames.first(),
         "last": frames.last(),
     }))

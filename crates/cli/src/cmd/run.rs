@@ -288,6 +288,9 @@ pub struct FramesOutcome {
     pub frames: usize,
     /// The video or scene folder they came from.
     pub source: PathBuf,
+    /// How an HDR video's frames were brought to SDR (one line).
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub hdr: Option<String>,
 }
 
 /// What the mask stage made (the summary of RoMo's report the run keeps).
@@ -605,15 +608,20 @@ fn run_frames(p: &Plan, r: &mut Results, ctx: &Ctx) -> Result<serde_json::Value>
     let outcome = match &p.source {
         Source::Video(video) => {
             let program = p.ffmpeg.to_string_lossy();
-            let frames = loader::video::extract_frames_with(&program, video, &p.scene, p.fps)?;
+            let extraction = loader::video::extract_frames_with(&program, video, &p.scene, p.fps)?;
             ctx.info(format!(
                 "  {} frames from {}",
-                frames.len(),
+                extraction.frames.len(),
                 video.display()
             ));
+            let hdr = extraction.hdr.as_ref().map(loader::video::Hdr::describe);
+            if let Some(line) = &hdr {
+                ctx.info(format!("  {line}"));
+            }
             FramesOutcome {
-                frames: frames.len(),
+                frames: extraction.frames.len(),
                 source: video.clone(),
+                hdr,
             }
         }
         Source::Scene(src) => {
@@ -634,6 +642,7 @@ fn run_frames(p: &Plan, r: &mut Results, ctx: &Ctx) -> Result<serde_json::Value>
             FramesOutcome {
                 frames,
                 source: src.clone(),
+                hdr: None,
             }
         }
     };
