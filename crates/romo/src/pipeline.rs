@@ -860,6 +860,68 @@ fn apply_occlusion(
     fl.l_coverage = fl.l.iter().filter(|b| **b).count() as f32 / m;
 }
 
+/// A frame's unlabelled pixels (neither U nor L) at least `fraction` of
+/// the grid's longer side from its nearest U pixel (all of them when the
+/// frame has no U), in pixel order.
+fn far_unlabelled(fl: &FrameLabels, w: usize, fraction: f32) -> Vec<usize> {
+    let h = fl.u.len() / w.max(1);
+    let min = fraction * w.max(h) as f32;
+    let d = chamfer_distance(&fl.u, w);
+    (0..fl.u.len())
+        .filter(|&i| !fl.u[i] && !fl.l[i] && d[i] >= min)
+        .collect()
+}
+
+/// Distance of every pixel of a `w`-wide mask to its nearest set pixel
+/// (3-4 chamfer, in px; infinite without any).
+fn chamfer_distance(mask: &[bool], w: usize) -> Vec<f32> {
+    let h = mask.len() / w.max(1);
+    let mut d: Vec<f32> = mask
+        .iter()
+        .map(|m| if *m { 0.0 } else { f32::INFINITY })
+        .collect();
+    let (a, b) = (1.0f32, 4.0 / 3.0);
+    for y in 0..h {
+        for x in 0..w {
+            let i = y * w + x;
+            let mut v = d[i];
+            if x > 0 {
+                v = v.min(d[i - 1] + a);
+            }
+            if y > 0 {
+                v = v.min(d[i - w] + a);
+                if x > 0 {
+                    v = v.min(d[i - w - 1] + b);
+                }
+                if x + 1 < w {
+                    v = v.min(d[i - w + 1] + b);
+                }
+            }
+            d[i] = v;
+        }
+    }
+    for y in (0..h).rev() {
+        for x in (0..w).rev() {
+            let i = y * w + x;
+            let mut v = d[i];
+            if x + 1 < w {
+                v = v.min(d[i + 1] + a);
+            }
+            if y + 1 < h {
+                v = v.min(d[i + w] + a);
+                if x + 1 < w {
+                    v = v.min(d[i + w + 1] + b);
+                }
+                if x > 0 {
+                    v = v.min(d[i + w - 1] + b);
+                }
+            }
+            d[i] = v;
+        }
+    }
+    d
+}
+
 /// Draw training samples: per kept frame up to `samples_per_frame`, half
 /// from U when it has that many.
 fn samples(
@@ -878,11 +940,24 @@ fn samples(
         }
         let mut u: Vec<usize> = (0..fl.u.len()).filter(|&i| fl.u[i]).collect();
         let mut l: Vec<usize> = (0..fl.l.len()).filter(|&i| fl.l[i]).collect();
+        let share = o.mlp.unlabelled_share;
+        let mut free = if share > 0.0 {
+            far_unlabelled(fl, pr.grid_rgb[t].c[0].w, o.mlp.unlabelled_distance)
+        } else {
+            Vec::new()
+        };
         let cap = o.mlp.samples_per_frame;
-        if cap > 0 {
+        let (nu, nl, nf) = if cap > 0 {
             let nu = u.len().min(cap / 2);
-            let nl = l.len().min(cap - nu);
-            for (v, k) in [(&mut u, nu), (&mut l, nl)] {
+            let nf = free.len().min(((cap - nu) as f64 * share).round() as usize);
+            (nu, l.len().min(cap - nu - nf), nf)
+        } else {
+            // All labelled pixels, and unlabelled ones in the same share.
+            let nf = (l.len() as f64 * share / (1.0 - share)).round() as usize;
+            (u.len(), l.len(), free.len().min(nf))
+        };
+        if cap > 0 || nf < free.len() {
+            for (v, k) in [(&mut u, nu), (&mut l, nl), (&mut free, nf)] {
                 for i in 0..k {
                     let j = rng.random_range(i..v.len());
                     v.swap(i, j);
@@ -890,7 +965,11 @@ fn samples(
                 v.truncate(k);
             }
         }
-        for (set, lab) in [(&u, Label::Moving), (&l, Label::Static)] {
+        for (set, lab) in [
+            (&u, Label::Moving),
+            (&l, Label::Static),
+            (&free, Label::Static),
+        ] {
             for &i in set {
                 x.extend_from_slice(&pr.feats[t][i * c..(i + 1) * c]);
                 y.push(lab);
@@ -1294,6 +1373,48 @@ fn report_frames(
 #[cfg(test)]
 mod tests {
     use super::*;
+
+    /// Chamfer distances from one set pixel: k along an axis, 4k/3 along a
+    /// diagonal; infinite without any set pixel.
+    #[test]
+    fn chamfer_distance_known_answers() {
+        let (w, h) = (9, 7);
+        let mut m = vec![false; w * h];
+        m[3 * w + 2] = true;
+        let d = chamfer_distance(&m, w);
+        assert_eq!(d[3 * w + 2], 0.0);
+        assert_eq!(d[3 * w + 8], 6.0);
+        assert_eq!(d[6 * w + 2], 3.0);
+        assert!((d[w + 4] - 8.0 / 3.0).abs() < 1e-6);
+        assert!((d[6 * w + 8] - (3.0 + 4.0)).abs() < 1e-6);
+        assert!(
+            chamfer_distance(&[false; 12], 4)
+                .iter()
+                .all(|v| v.is_infinite())
+        );
+    }
+
+    /// Static samples from unlabelled pixels: never U or L, never within
+    /// the distance of U; a frame without U gives all its unlabelled pixels.
+    #[test]
+    fn far_unlabelled_pixels_keep_away_from_u() {
+        let (w, h) = (20, 10);
+        let mut fl = FrameLabels::no_evidence(w * h);
+        for y in 0..h {
+            fl.l[y * w + 19] = true;
+        }
+        assert_eq!(far_unlabelled(&fl, w, 0.25).len(), w * h - h);
+        fl.u[5 * w + 3] = true;
+        // 0.25 of the longer side (20): 5 px.
+        let far = far_unlabelled(&fl, w, 0.25);
+        let d = chamfer_distance(&fl.u, w);
+        assert!(!far.is_empty());
+        for (i, di) in d.iter().enumerate() {
+            let expect = !fl.u[i] && !fl.l[i] && *di >= 5.0;
+            assert_eq!(far.contains(&i), expect, "pixel {i}");
+        }
+        assert!(!far.contains(&(5 * w + 7)) && far.contains(&(5 * w + 8)));
+    }
 
     /// A partial `flow` object changes only the fields it names: the rest
     /// stay at the mask stage's preset, not at OpenCV's MEDIUM.
