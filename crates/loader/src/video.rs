@@ -232,39 +232,41 @@ fn ffmpeg_frames(
     })
 }
 
-/// `ffprobe` next to `program` (or on PATH).
-fn ffprobe_of(program: &str) -> String {
-    match program.strip_suffix("ffmpeg") {
+/// `ffprobe` next to `program` (or on PATH) on the video's first stream
+/// with `args`: its standard output, or `None` when it cannot run or fails.
+fn ffprobe_text(program: &str, video: &Path, args: &[&str]) -> Option<String> {
+    let probe = match program.strip_suffix("ffmpeg") {
         Some(prefix) => format!("{prefix}ffprobe"),
         None => "ffprobe".into(),
-    }
+    };
+    let out = Command::new(probe)
+        .args(["-v", "error", "-select_streams", "v:0"])
+        .args(args)
+        .arg(video)
+        .output()
+        .ok()?;
+    out.status
+        .success()
+        .then(|| String::from_utf8_lossy(&out.stdout).into_owned())
 }
 
 /// The video's HDR transfer and peak from its first frame (`ffprobe`), and
 /// whether `program` can tone map it; `None` for SDR, or when ffprobe is
 /// missing (the frames are then converted as SDR).
 fn hdr_of(program: &str, video: &Path) -> Option<Hdr> {
-    let out = Command::new(ffprobe_of(program))
-        .args([
-            "-v",
-            "error",
-            "-select_streams",
-            "v:0",
+    let text = ffprobe_text(
+        program,
+        video,
+        &[
             "-read_intervals",
             "%+#1",
-        ])
-        .args([
             "-show_entries",
             "stream=color_transfer:frame=color_transfer:frame_side_data=max_content,max_luminance",
-        ])
-        .args(["-of", "default=noprint_wrappers=1"])
-        .arg(video)
-        .output()
-        .ok()?;
-    if !out.status.success() {
-        return None;
-    }
-    let (transfer, peak_nits) = parse_hdr(&String::from_utf8_lossy(&out.stdout))?;
+            "-of",
+            "default=noprint_wrappers=1",
+        ],
+    )?;
+    let (transfer, peak_nits) = parse_hdr(&text)?;
     Some(Hdr {
         transfer,
         peak_nits,
@@ -321,20 +323,19 @@ fn has_tone_mapping(program: &str) -> bool {
 /// when ffprobe is missing or reports none (the check is then skipped and
 /// ffmpeg has the last word).
 fn video_frame_rate(program: &str, video: &Path) -> Option<f64> {
-    let out = Command::new(ffprobe_of(program))
-        .args(["-v", "error", "-select_streams", "v:0"])
-        .args(["-show_entries", "stream=avg_frame_rate,r_frame_rate"])
-        .args(["-of", "default=noprint_wrappers=1:nokey=1"])
-        .arg(video)
-        .output()
-        .ok()?;
-    if !out.status.success() {
-        return None;
-    }
+    let text = ffprobe_text(
+        program,
+        video,
+        &[
+            "-show_entries",
+            "stream=avg_frame_rate,r_frame_rate",
+            "-of",
+            "default=noprint_wrappers=1:nokey=1",
+        ],
+    )?;
     // The larger of the average and the base rate: variable-rate videos
     // may legitimately be sampled up to their base rate.
-    String::from_utf8_lossy(&out.stdout)
-        .lines()
+    text.lines()
         .filter_map(|l| {
             let (n, d) = l.trim().split_once('/')?;
             let (n, d) = (n.parse::<f64>().ok()?, d.parse::<f64>().ok()?);
