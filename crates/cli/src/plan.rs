@@ -161,18 +161,11 @@ pub fn probe_video(ffmpeg: &Path, video: &Path) -> anyhow::Result<VideoInfo> {
             .map(str::trim)
     };
     let num = |k: &str| field(k).and_then(|v| v.parse::<u64>().ok());
-    let fps = field("avg_frame_rate").and_then(|r| {
-        let (n, d) = r.split_once('/')?;
-        let (n, d) = (n.parse::<f64>().ok()?, d.parse::<f64>().ok()?);
-        (n > 0.0 && d > 0.0).then(|| n / d)
-    });
+    let fps = field("avg_frame_rate").and_then(|r| loader::video::ffprobe_ratio(r, '/'));
     match (num("width"), num("height"), num("nb_read_packets")) {
         (Some(w), Some(h), Some(n)) if out.status.success() && w > 0 && h > 0 && n > 0 => {
-            let sar = field("sample_aspect_ratio").and_then(|r| {
-                let (n, d) = r.split_once(':')?;
-                let (n, d) = (n.parse::<f64>().ok()?, d.parse::<f64>().ok()?);
-                (n > 0.0 && d > 0.0).then(|| n / d)
-            });
+            let sar =
+                field("sample_aspect_ratio").and_then(|r| loader::video::ffprobe_ratio(r, ':'));
             let w = match sar {
                 Some(r) => ((w as f64 * r).round() as u64).max(1),
                 None => w,

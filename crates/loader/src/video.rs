@@ -289,13 +289,7 @@ fn parse_hdr(text: &str) -> Option<(&'static str, f64)> {
         "arib-std-b67" => Some("HLG"),
         _ => None,
     })?;
-    let number = |v: &str| -> Option<f64> {
-        let x = match v.split_once('/') {
-            Some((n, d)) => n.parse::<f64>().ok()? / d.parse::<f64>().ok()?,
-            None => v.parse().ok()?,
-        };
-        (x.is_finite() && x > 0.0).then_some(x)
-    };
+    let number = |v: &str| ffprobe_ratio(v, '/');
     let peak = value("max_content")
         .into_iter()
         .find_map(number)
@@ -336,12 +330,20 @@ fn video_frame_rate(program: &str, video: &Path) -> Option<f64> {
     // The larger of the average and the base rate: variable-rate videos
     // may legitimately be sampled up to their base rate.
     text.lines()
-        .filter_map(|l| {
-            let (n, d) = l.trim().split_once('/')?;
-            let (n, d) = (n.parse::<f64>().ok()?, d.parse::<f64>().ok()?);
-            (n > 0.0 && d > 0.0).then_some(n / d)
-        })
+        .filter_map(|l| ffprobe_ratio(l, '/'))
         .reduce(f64::max)
+}
+
+/// A positive finite number as ffprobe prints one: `n`, or `n<sep>d` (a
+/// frame rate `30000/1001`, an aspect ratio `4:3`); `None` otherwise
+/// (`0/0`, `N/A`).
+pub fn ffprobe_ratio(text: &str, sep: char) -> Option<f64> {
+    let text = text.trim();
+    let x = match text.split_once(sep) {
+        Some((n, d)) => n.trim().parse::<f64>().ok()? / d.trim().parse::<f64>().ok()?,
+        None => text.parse::<f64>().ok()?,
+    };
+    (x.is_finite() && x > 0.0).then_some(x)
 }
 
 /// True when `ffmpeg -version` runs.
@@ -604,6 +606,20 @@ mod tests {
     }
 
     /// Peaks from light-level metadata, as ffprobe prints them.
+    #[test]
+    fn ffprobe_ratios() {
+        assert_eq!(ffprobe_ratio("30000/1001", '/'), Some(30000.0 / 1001.0));
+        assert_eq!(ffprobe_ratio(" 4:3 ", ':'), Some(4.0 / 3.0));
+        assert_eq!(ffprobe_ratio("1600", '/'), Some(1600.0));
+        for bad in ["0/0", "0:1", "N/A", "", "-1/2", "1/0"] {
+            assert_eq!(
+                ffprobe_ratio(bad, if bad.contains(':') { ':' } else { '/' }),
+                None,
+                "{bad}"
+            );
+        }
+    }
+
     #[test]
     fn hdr_peak_is_read_from_the_stream_metadata() {
         let probe = "color_transfer=smpte2084\nmax_luminance=40000000/10000\nmax_content=1600\ncolor_transfer=smpte2084\n";

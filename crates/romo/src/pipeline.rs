@@ -956,14 +956,19 @@ fn samples(
             let nf = (l.len() as f64 * share / (1.0 - share)).round() as usize;
             (u.len(), l.len(), free.len().min(nf))
         };
-        if cap > 0 || nf < free.len() {
-            for (v, k) in [(&mut u, nu), (&mut l, nl), (&mut free, nf)] {
-                for i in 0..k {
-                    let j = rng.random_range(i..v.len());
-                    v.swap(i, j);
-                }
-                v.truncate(k);
+        let mut draw = |v: &mut Vec<usize>, k: usize| {
+            for i in 0..k {
+                let j = rng.random_range(i..v.len());
+                v.swap(i, j);
             }
+            v.truncate(k);
+        };
+        if cap > 0 {
+            draw(&mut u, nu);
+            draw(&mut l, nl);
+        }
+        if nf < free.len() {
+            draw(&mut free, nf);
         }
         for (set, lab) in [
             (&u, Label::Moving),
