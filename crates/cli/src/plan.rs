@@ -5,11 +5,13 @@
 //! downscale and step count — so that the estimated wall time of all stages
 //! fits the budget. Estimates come from [`Rates`]: the training step time is
 //! probed on this machine's adapter ([`probe_step_seconds`], a few steps on
-//! synthetic splats at two resolutions, fitted as `a + b · pixels`); the mask
-//! and COLMAP costs are per-pixel / per-feature rates measured on the 2-core
-//! development machine, scaled by how much slower or faster this machine's
-//! CPU runs the mask stage's optical flow ([`probe_cpu_factor`],
-//! [`Rates::measured`]).
+//! synthetic splats at two resolutions and two splat counts, fitted as
+//! bilinear in pixels and splats, [`probe_train_rates`]) and charged at the
+//! splat count the schedule's densification is expected to average
+//! ([`mean_splats`]); the mask and COLMAP costs are per-pixel / per-feature
+//! rates measured on the 2-core development machine, scaled by how much
+//! slower or faster this machine's CPU runs the mask stage's optical flow
+//! ([`probe_cpu_factor`], [`Rates::measured`]).
 //!
 //! Order of choices:
 //! 1. masks: every frame, full resolution (RoMo needs consecutive frames),
@@ -47,23 +49,66 @@ pub const MIN_STEPS: usize = 300;
 /// Shortest training-image side the planner goes down to, pixels.
 pub const MIN_TRAIN_SIDE: u32 = 120;
 
+/// Splats a run's training starts from, for the estimate: COLMAP's sparse
+/// points of a video at the planner's features (4 900–6 500 in the 854×480
+/// runs of `docs/results.md`, fewer for short clips).
+pub const INIT_SPLATS: f64 = 5000.0;
+/// Growth of the splat count per densification round of the default
+/// strategy, the highest of nine runs of 100 to 2700 steps at 214×120 to
+/// 854×480 (1.27–1.34: final over initial count, to the power one over the
+/// rounds), so that the estimate errs long.
+pub const DENSIFY_GROWTH: f64 = 1.34;
+/// Splat counts the training probe runs at (the bilinear fit's two ends).
+pub const PROBE_SPLATS: [usize; 2] = [5_000, 40_000];
+
+/// Training-step time, seconds = `a + per_px · pixels + per_splat · splats
+/// + per_px_splat · pixels · splats` (rasterisation grows with both).
+#[derive(Debug, Clone, Copy, Default, PartialEq, Serialize)]
+pub struct StepRates {
+    pub a: f64,
+    pub per_px: f64,
+    pub per_splat: f64,
+    pub per_px_splat: f64,
+}
+
+impl StepRates {
+    /// A step that does not depend on the splat count.
+    #[cfg(test)]
+    pub fn flat(a: f64, per_px: f64) -> Self {
+        StepRates {
+            a,
+            per_px,
+            ..Default::default()
+        }
+    }
+
+    /// Seconds of one step at `pixels` with `splats`.
+    pub fn step(&self, pixels: f64, splats: f64) -> f64 {
+        let per_splat = (self.per_splat + self.per_px_splat * pixels).max(0.0);
+        self.a + self.per_px * pixels + per_splat * splats
+    }
+}
+
 /// Measured costs.
 #[derive(Debug, Clone, Copy, PartialEq, Serialize)]
 pub struct Rates {
-    /// Training: seconds per step = `train_step_s + train_s_per_px · pixels`.
-    pub train_step_s: f64,
-    pub train_s_per_px: f64,
+    /// Training step time on this adapter.
+    pub train: StepRates,
     /// RoMo mask stage, seconds per frame = `mask_s_per_frame +
     /// mask_s_per_px · pixels`: most of it runs on the fixed working grid,
     /// the rest (decoding, the guided filter, writing) at full resolution.
     pub mask_s_per_frame: f64,
     pub mask_s_per_px: f64,
-    /// COLMAP SIFT extraction, seconds per pixel at the SIFT size.
+    /// COLMAP SIFT extraction, seconds per image plus per pixel at the
+    /// SIFT size.
+    pub sift_s_per_image: f64,
     pub sift_s_per_px: f64,
     /// COLMAP matching, seconds per image pair per feature.
     pub match_s_per_pair_feature: f64,
     /// COLMAP mapper, seconds per image per 1000 features.
     pub mapper_s_per_image_kfeature: f64,
+    /// COLMAP image undistorter, seconds per pixel of the frames.
+    pub undistort_s_per_px: f64,
     /// Evaluation, export and report, seconds per training-image pixel
     /// (renders of the held-out views) plus a fixed part.
     pub finish_s: f64,
@@ -73,25 +118,31 @@ pub struct Rates {
 }
 
 impl Rates {
-    /// Mask and COLMAP rates in units of the development machine's
-    /// [`CPU_PROBE_REFERENCE_S`] (COLMAP 3.8 SIFT 2.2 s a 854×480 frame,
-    /// sequential matching with overlap 10 at 4096 features 0.6 s a pair,
-    /// from the README "run" section's 65 frames), times `cpu_factor` (this
-    /// CPU's [`probe_cpu_factor`]), with the training terms given by a probe
-    /// of the adapter. The mask stage took 0.155 s a 854×480 frame over a
-    /// 650-frame video where the probe ran at 0.39 (`romosplat mask` on
-    /// `lady-running.mp4` looped ten times, 101 s) and 0.384 s a 3840×2160
-    /// frame (the 65 frames upscaled, 25 s, probe at 0.36): in those units
-    /// 0.37 s a frame plus 0.078 s a megapixel.
-    pub fn measured(train_step_s: f64, train_s_per_px: f64, cpu_factor: f64) -> Self {
+    /// Mask and COLMAP rates of the development machine (where the CPU
+    /// probe takes [`CPU_PROBE_REFERENCE_S`]) times `cpu_factor` (this CPU's
+    /// [`probe_cpu_factor`]), with the training terms given by a probe of
+    /// the adapter.
+    /// - Mask stage: 0.155 s a 854×480 frame over a 650-frame video
+    ///   (`romosplat mask` on `lady-running.mp4` looped ten times, 101 s,
+    ///   the probe at 1.02) and 0.384 s a 3840×2160 frame (its 65 frames
+    ///   upscaled, 25 s, probe at 0.95): 0.141 s a frame plus 0.030 s a
+    ///   megapixel.
+    /// - COLMAP 3.8, from the stage timings of 19 `run`s of 10–455 frames
+    ///   (`docs/results.md`, "Time-budget plan"): SIFT 0.02 s an image plus
+    ///   0.8 s a megapixel at the SIFT size; matching 5.3e-5 s a pair per
+    ///   feature; the mapper 0.19 s an image per 1000 features (sequential
+    ///   matching; photo collections matched exhaustively ran 0.06–1.2);
+    ///   the undistorter 0.25 s a megapixel of the frames.
+    pub fn measured(train: StepRates, cpu_factor: f64) -> Self {
         Rates {
-            train_step_s,
-            train_s_per_px,
-            mask_s_per_frame: cpu_factor * 0.37,
-            mask_s_per_px: cpu_factor * 0.078e-6,
-            sift_s_per_px: cpu_factor * 2.2 / (854.0 * 480.0),
-            match_s_per_pair_feature: cpu_factor * 0.6 / 4096.0,
-            mapper_s_per_image_kfeature: cpu_factor * 0.5,
+            train,
+            mask_s_per_frame: cpu_factor * 0.141,
+            mask_s_per_px: cpu_factor * 0.030e-6,
+            sift_s_per_image: cpu_factor * 0.02,
+            sift_s_per_px: cpu_factor * 0.8e-6,
+            match_s_per_pair_feature: cpu_factor * 5.3e-5,
+            mapper_s_per_image_kfeature: cpu_factor * 0.19,
+            undistort_s_per_px: cpu_factor * 0.25e-6,
             finish_s: 30.0,
             cpu_factor,
         }
@@ -215,6 +266,10 @@ pub struct Input {
     pub height: u32,
     /// Sequential matching overlap that will be used.
     pub overlap: u32,
+    /// COLMAP matches every pair (photo collections) instead of each frame
+    /// with the next `overlap`.
+    #[serde(default)]
+    pub exhaustive: bool,
     /// Models trained at the planned resolution and steps: 2 with the
     /// unmasked baseline, else 1.
     pub trainings: usize,
@@ -266,6 +321,9 @@ pub struct Plan {
     pub pose_s: f64,
     pub train_s: f64,
     pub finish_s: f64,
+    /// Splats the training estimate assumes on average ([`mean_splats`]).
+    #[serde(default)]
+    pub mean_splats: f64,
     /// False when `--steps` and `--downscale` were both given and the
     /// training rate was not probed (`train_s` is then 0).
     #[serde(default = "yes")]
@@ -342,7 +400,11 @@ impl Plan {
                     ""
                 },
                 if self.train_estimated {
-                    m(self.train_s)
+                    format!(
+                        "{} (at ≈ {:.0}k splats on average)",
+                        m(self.train_s),
+                        self.mean_splats / 1000.0
+                    )
                 } else {
                     "set by --steps and --downscale (not estimated)".into()
                 }
@@ -369,21 +431,71 @@ impl Plan {
 /// `colmap automatic_reconstructor`'s medium and low quality.
 const POSE_TIERS: [(u32, u32); 4] = [(1600, 4096), (1000, 2048), (640, 1024), (400, 512)];
 
+/// Pixels per SIFT feature COLMAP finds, at most: 133–294 over the 19 runs
+/// of [`Rates::measured`] (a feature cap above that is not reached).
+const PX_PER_FEATURE: f64 = 150.0;
+
 fn pose_seconds(r: &Rates, inp: &Input, stride: usize, size: u32, features: u32) -> f64 {
     let n = inp.frames.div_ceil(stride.max(1)) as f64;
     let long = f64::from(inp.width.max(inp.height));
     let s = (f64::from(size) / long).min(1.0);
-    let px = f64::from(inp.width) * f64::from(inp.height) * s * s;
-    // Features actually found are bounded by the image: ~1 per 40 pixels.
-    let feats = f64::from(features).min(px / 40.0);
-    let pairs = n * f64::from(inp.overlap).min(n - 1.0).max(0.0);
-    n * px * r.sift_s_per_px
+    let frame_px = f64::from(inp.width) * f64::from(inp.height);
+    let px = frame_px * s * s;
+    let feats = f64::from(features).min(px / PX_PER_FEATURE);
+    let pairs = if inp.exhaustive {
+        n * (n - 1.0) / 2.0
+    } else {
+        n * f64::from(inp.overlap).min(n - 1.0).max(0.0)
+    };
+    n * (r.sift_s_per_image + px * r.sift_s_per_px)
         + pairs * feats * r.match_s_per_pair_feature
         + n * feats / 1000.0 * r.mapper_s_per_image_kfeature
+        + n * frame_px * r.undistort_s_per_px
 }
 
-fn train_step(r: &Rates, w: u32, h: u32) -> f64 {
-    r.train_step_s + r.train_s_per_px * f64::from(w) * f64::from(h)
+/// The splat count a `run` training of `steps` steps averages over its
+/// steps: [`INIT_SPLATS`] times [`DENSIFY_GROWTH`] per densification round of
+/// its schedule (`short_schedule`), capped at the schedule's maximum.
+pub fn mean_splats(steps: usize) -> f64 {
+    let steps = steps.max(1);
+    let o = crate::cmd::train_common::short_schedule(steps as u32, true).strategy;
+    let (from, every, until) = (
+        o.densify_from as usize,
+        (o.densify_every as usize).max(1),
+        o.densify_until as usize,
+    );
+    let cap = o.max_splats as f64;
+    let (mut n, mut at, mut sum) = (INIT_SPLATS.min(cap), 0usize, 0.0);
+    let mut round = from.max(1);
+    while round < steps && round <= until {
+        sum += n * (round - at) as f64;
+        at = round;
+        n = (n * DENSIFY_GROWTH).min(cap);
+        round += every;
+    }
+    sum += n * (steps - at) as f64;
+    sum / steps as f64
+}
+
+/// Seconds `steps` training steps take at `w`×`h` (one model).
+fn train_seconds(r: &Rates, w: u32, h: u32, steps: usize) -> f64 {
+    steps as f64
+        * r.train
+            .step(f64::from(w) * f64::from(h), mean_splats(steps))
+}
+
+/// The most steps (up to `limit`) whose training at `w`×`h` fits `seconds`.
+fn steps_fitting(r: &Rates, w: u32, h: u32, seconds: f64, limit: usize) -> usize {
+    let (mut lo, mut hi) = (0usize, limit);
+    while lo < hi {
+        let mid = (lo + hi).div_ceil(2);
+        if train_seconds(r, w, h, mid) <= seconds {
+            lo = mid;
+        } else {
+            hi = mid - 1;
+        }
+    }
+    lo
 }
 
 fn scaled(v: u32, d: u32) -> u32 {
@@ -464,9 +576,10 @@ pub fn plan(input: &Input, rates: &Rates, budget_s: f64, fixed: &Fixed) -> Plan 
         None => (1..=max_d).collect(),
     };
     let trainings = input.trainings.max(1);
+    let limit = fixed.steps.unwrap_or(0).max(MAX_STEPS);
     let fit = |d: u32| {
-        let t = train_step(rates, scaled(input.width, d), scaled(input.height, d));
-        (left / (t * trainings as f64)).floor() as usize
+        let (w, h) = (scaled(input.width, d), scaled(input.height, d));
+        steps_fitting(rates, w, h, left / trainings as f64, limit)
     };
     let (downscale, steps) = match fixed.steps {
         Some(steps) => {
@@ -512,7 +625,8 @@ pub fn plan(input: &Input, rates: &Rates, budget_s: f64, fixed: &Fixed) -> Plan 
         masks: input.masks,
         mask_s,
         pose_s,
-        train_s: (steps * trainings) as f64 * train_step(rates, tw, th),
+        train_s: trainings as f64 * train_seconds(rates, tw, th, steps),
+        mean_splats: mean_splats(steps),
         finish_s,
         train_estimated: true,
         cpu_factor: rates.cpu_factor,
@@ -581,14 +695,15 @@ pub fn probe_step_seconds(
     Ok(times[times.len() / 2])
 }
 
-/// Fit `a + b · pixels` from probes at two sizes of a `w`×`h` frame (longer
-/// side 160 and 480 px). Returns (a, b).
+/// Fit [`StepRates`] from probes at two sizes of a `w`×`h` frame (longer
+/// side 160 and 480 px, never above the frame's own) and the two
+/// [`PROBE_SPLATS`] counts: exact through the four points, slopes clamped at
+/// zero.
 pub fn probe_train_rates(
     backend: &mut dyn splat::backend::TrainBackend,
     w: u32,
     h: u32,
-    splats: usize,
-) -> anyhow::Result<(f64, f64)> {
+) -> anyhow::Result<StepRates> {
     let size = |long: u32| {
         let s = f64::from(long) / f64::from(w.max(h));
         (
@@ -596,19 +711,52 @@ pub fn probe_train_rates(
             ((f64::from(h) * s).round() as u32).max(8),
         )
     };
-    // Never probe above the frames' own size.
     let long = w.max(h);
     let (w0, h0) = size(long.min(160));
     let (w1, h1) = size(long.min(480));
+    let mut at = |w: u32, h: u32| -> anyhow::Result<[f64; 2]> {
+        Ok([
+            probe_step_seconds(backend, w, h, PROBE_SPLATS[0], 5)?,
+            probe_step_seconds(backend, w, h, PROBE_SPLATS[1], 5)?,
+        ])
+    };
+    let small = at(w0, h0)?;
+    let p0 = f64::from(w0 * h0);
     if w0 * h0 >= w1 * h1 {
-        return Ok((probe_step_seconds(backend, w1, h1, splats, 5)?, 0.0));
+        return Ok(fit_step_rates([p0, p0], [small, small]));
     }
-    let t0 = probe_step_seconds(backend, w0, h0, splats, 5)?;
-    let t1 = probe_step_seconds(backend, w1, h1, splats, 5)?;
-    let (p0, p1) = (f64::from(w0 * h0), f64::from(w1 * h1));
-    let b = ((t1 - t0) / (p1 - p0)).max(0.0);
-    let a = (t0 - b * p0).max(0.0);
-    Ok((a, b))
+    let large = at(w1, h1)?;
+    Ok(fit_step_rates([p0, f64::from(w1 * h1)], [small, large]))
+}
+
+/// [`StepRates`] through step times `t[i][j]` at `pixels[i]` and
+/// [`PROBE_SPLATS`]`[j]` (bilinear; the slopes clamped at zero, so noise
+/// never makes more splats or pixels cheaper; equal `pixels`: no pixel
+/// terms).
+pub fn fit_step_rates(pixels: [f64; 2], t: [[f64; 2]; 2]) -> StepRates {
+    let [n0, n1] = PROBE_SPLATS.map(|n| n as f64);
+    // Per-splat slope and intercept at zero splats, at each size.
+    let line = |t: [f64; 2]| {
+        let slope = ((t[1] - t[0]) / (n1 - n0)).max(0.0);
+        (slope, (t[0] - slope * n0).max(0.0))
+    };
+    let ((s0, i0), (s1, i1)) = (line(t[0]), line(t[1]));
+    let [p0, p1] = pixels;
+    if p1 <= p0 {
+        return StepRates {
+            a: i0,
+            per_splat: s0,
+            ..Default::default()
+        };
+    }
+    let per_px_splat = ((s1 - s0) / (p1 - p0)).max(0.0);
+    let per_px = ((i1 - i0) / (p1 - p0)).max(0.0);
+    StepRates {
+        a: (i0 - per_px * p0).max(0.0),
+        per_px,
+        per_splat: s0 - per_px_splat * p0,
+        per_px_splat,
+    }
 }
 
 /// Size of the CPU probe's frames: the mask stage's flow resolution for
@@ -616,7 +764,7 @@ pub fn probe_train_rates(
 const CPU_PROBE_SIZE: (usize, usize) = (512, 288);
 /// Median seconds of [`cpu_probe_once`] on the 2-core development machine,
 /// the one the mask and COLMAP rates of [`Rates::measured`] were measured on.
-pub const CPU_PROBE_REFERENCE_S: f64 = 0.21;
+pub const CPU_PROBE_REFERENCE_S: f64 = 0.08;
 
 /// One forward and one backward DIS flow (the mask stage's preset) between
 /// two synthetic textured frames a few pixels apart, seconds.
@@ -666,6 +814,7 @@ mod tests {
             width: 854,
             height: 480,
             overlap: 10,
+            exhaustive: false,
             trainings: 2,
             masks: true,
             fps: Some(30.0),
@@ -674,7 +823,7 @@ mod tests {
 
     /// 0.05 s a step plus 0.5 µs a pixel: 240×135 → 0.066 s a step.
     fn rates() -> Rates {
-        Rates::measured(0.05, 0.5e-6, 1.0)
+        Rates::measured(StepRates::flat(0.05, 0.5e-6), 1.0)
     }
 
     /// The plan sees the frames' size as extraction writes them: a phone
@@ -740,7 +889,7 @@ mod tests {
         assert!(both.total_s() <= 1200.0, "{:?}", both.lines());
         // The same per-step time for both models, half the training budget
         // each (what masks, COLMAP and the finish leave).
-        let work = |p: &Plan| p.steps as f64 * train_step(&rates(), p.train_width, p.train_height);
+        let work = |p: &Plan| train_seconds(&rates(), p.train_width, p.train_height, p.steps);
         let left = 1200.0 - both.mask_s - both.pose_s - both.finish_s;
         assert!(work(&both) <= left / 2.0 + 1e-9, "{alone:?} {both:?}");
         assert!(alone.train_s <= left + 1e-9);
@@ -798,7 +947,7 @@ mod tests {
         let fast = plan(&video(), &rates(), 1200.0, &Fixed::default());
         let slow = plan(
             &video(),
-            &Rates::measured(0.2, 4e-6, 1.0),
+            &Rates::measured(StepRates::flat(0.2, 4e-6), 1.0),
             1200.0,
             &Fixed::default(),
         );
@@ -856,7 +1005,12 @@ mod tests {
             pose_max_image_size: Some(640),
         };
         let here = plan(&video(), &rates(), 1200.0, &f);
-        let slow = plan(&video(), &Rates::measured(0.05, 0.5e-6, 3.0), 1200.0, &f);
+        let slow = plan(
+            &video(),
+            &Rates::measured(StepRates::flat(0.05, 0.5e-6), 3.0),
+            1200.0,
+            &f,
+        );
         assert!((slow.mask_s / here.mask_s - 3.0).abs() < 1e-9);
         assert!((slow.pose_s / here.pose_s - 3.0).abs() < 1e-9);
         assert_eq!(slow.train_s, here.train_s);
@@ -865,7 +1019,7 @@ mod tests {
         let auto_here = plan(&video(), &rates(), 900.0, &Fixed::default());
         let auto_slow = plan(
             &video(),
-            &Rates::measured(0.05, 0.5e-6, 3.0),
+            &Rates::measured(StepRates::flat(0.05, 0.5e-6), 3.0),
             900.0,
             &Fixed::default(),
         );
@@ -902,6 +1056,137 @@ mod tests {
     }
 
     #[test]
+    fn the_mean_splat_count_follows_the_schedules_densification() {
+        // 2000 steps: a round every 250 steps from 250 to 1500, step by step.
+        let (mut n, mut sum) = (INIT_SPLATS, 0.0);
+        for step in 0..2000 {
+            if (250..=1500).contains(&step) && step % 250 == 0 {
+                n *= DENSIFY_GROWTH;
+            }
+            sum += n;
+        }
+        let m = mean_splats(2000);
+        assert!((m - sum / 2000.0).abs() < 1e-6 * m, "{m} {}", sum / 2000.0);
+        // lady-running's runs averaged 13 391 splats over 2000 steps (4 864 →
+        // 21 565) and 25 015 over 2700 (4 836 → 48 580): covered, within 25%.
+        for (steps, seen) in [(2000, 13_391.0), (2700, 25_015.0)] {
+            let r = mean_splats(steps) / seen;
+            assert!((1.0..1.25).contains(&r), "{steps}: {r}");
+        }
+        // Longer schedules densify more rounds, up to the cap.
+        let long = mean_splats(7000);
+        assert!(long > m && long <= 60_000.0, "{long}");
+        assert!(mean_splats(1) >= INIT_SPLATS.min(20_000.0) - 1e-9);
+    }
+
+    #[test]
+    fn the_step_fit_goes_through_its_four_probes() {
+        let truth = StepRates {
+            a: 0.03,
+            per_px: 2e-7,
+            per_splat: 5e-6,
+            per_px_splat: 1e-11,
+        };
+        let px = [160.0 * 90.0, 480.0 * 270.0];
+        let t = px.map(|p| PROBE_SPLATS.map(|n| truth.step(p, n as f64)));
+        let fit = fit_step_rates(px, t);
+        for (got, want) in [
+            (fit.a, truth.a),
+            (fit.per_px, truth.per_px),
+            (fit.per_splat, truth.per_splat),
+            (fit.per_px_splat, truth.per_px_splat),
+        ] {
+            assert!(
+                (got - want).abs() <= 1e-9 * want.abs().max(1e-12),
+                "{fit:?}"
+            );
+        }
+        // Noise that makes more splats look cheaper gives a flat step.
+        let noisy = fit_step_rates(px, [[0.2, 0.1], [0.5, 0.4]]);
+        assert_eq!((noisy.per_splat, noisy.per_px_splat), (0.0, 0.0));
+        assert!(noisy.step(px[0], 1e6) > 0.0);
+        // One size only (a frame at most 160 px long): no pixel terms.
+        let one = fit_step_rates([px[0]; 2], [t[0], t[0]]);
+        assert_eq!((one.per_px, one.per_px_splat), (0.0, 0.0));
+        assert!((one.step(px[0], 15_000.0) - truth.step(px[0], 15_000.0)).abs() < 1e-9);
+    }
+
+    #[test]
+    fn training_is_charged_at_the_expected_splat_count() {
+        let splats = Rates::measured(
+            StepRates {
+                a: 0.03,
+                per_px: 2e-7,
+                per_splat: 5e-6,
+                per_px_splat: 1e-11,
+            },
+            1.0,
+        );
+        let p = plan(&video(), &splats, 1200.0, &Fixed::default());
+        let px = f64::from(p.train_width * p.train_height);
+        let want = 2.0 * p.steps as f64 * splats.train.step(px, mean_splats(p.steps));
+        assert!((p.train_s - want).abs() < 1e-6, "{p:?}");
+        assert_eq!(p.mean_splats, mean_splats(p.steps));
+        assert!(p.total_s() <= 1200.0, "{:?}", p.lines());
+        // Steps are the most that fit: a hundred more would not.
+        let left = 1200.0 - p.mask_s - p.pose_s - p.finish_s;
+        let more = 2.0 * train_seconds(&splats, p.train_width, p.train_height, p.steps + 100);
+        assert!(more > left || p.steps >= MAX_STEPS, "{p:?}");
+    }
+
+    #[test]
+    fn photo_collections_plan_every_pair() {
+        let f = Fixed {
+            steps: Some(500),
+            downscale: Some(4),
+            pose_stride: Some(1),
+            pose_features: Some(1024),
+            pose_max_image_size: Some(640),
+        };
+        let seq = plan(&video(), &rates(), 1e6, &f);
+        let all = plan(
+            &Input {
+                exhaustive: true,
+                ..video()
+            },
+            &rates(),
+            1e6,
+            &f,
+        );
+        // 65 frames: 2080 pairs against 650, 1024 features each.
+        let extra = (2080.0 - 650.0) * 1024.0 * rates().match_s_per_pair_feature;
+        assert!(
+            (all.pose_s - seq.pose_s - extra).abs() < 1e-6,
+            "{seq:?} {all:?}"
+        );
+    }
+
+    #[test]
+    fn the_colmap_rates_reproduce_a_measured_run() {
+        // lady-running, 54 keyframes of 854×480, SIFT ≤ 854 px, 4096
+        // features, sequential overlap 10: 91.2 s of COLMAP stages with the
+        // CPU probe at 0.92 (`docs/results.md`, "Time-budget plan").
+        let f = Fixed {
+            steps: Some(100),
+            downscale: Some(4),
+            pose_stride: Some(1),
+            pose_features: Some(4096),
+            pose_max_image_size: Some(854),
+        };
+        let input = Input {
+            frames: 54,
+            ..video()
+        };
+        let p = plan(
+            &input,
+            &Rates::measured(StepRates::default(), 0.92),
+            1e6,
+            &f,
+        );
+        assert!((1.0..1.5).contains(&(p.pose_s / 91.2)), "{}", p.pose_s);
+    }
+
+    #[test]
     fn long_videos_are_subsampled_for_colmap() {
         let long = Input {
             frames: 2000,
@@ -923,6 +1208,7 @@ mod frame_step_tests {
             width: 854,
             height: 480,
             overlap: 10,
+            exhaustive: false,
             trainings: 2,
             masks: true,
             fps,
@@ -931,8 +1217,9 @@ mod frame_step_tests {
 
     #[test]
     fn a_long_video_is_extracted_at_a_lower_rate_so_its_masks_fit() {
-        // 0.40 s a 854×480 frame at factor 1: 3640 frames would take 24 minutes.
-        let rates = Rates::measured(0.05, 0.5e-6, 1.0);
+        // 0.153 s a 854×480 frame at factor 1: 3640 frames would take 9.3
+        // minutes, over the 7 the masks may have of 20.
+        let rates = Rates::measured(StepRates::flat(0.05, 0.5e-6), 1.0);
         let p = plan(&long(3640, Some(30.0)), &rates, 1200.0, &Fixed::default());
         assert!(p.frame_step > 1, "{p:?}");
         assert!(p.mask_s <= MASK_SHARE * 1200.0 + 1e-9, "{p:?}");
@@ -960,8 +1247,8 @@ mod frame_step_tests {
 
     #[test]
     fn the_mask_rate_reproduces_its_two_measurements() {
-        // 0.155 s a 854×480 frame with the probe at 0.39, 0.384 s a
-        // 3840×2160 frame at 0.36 (`Rates::measured`).
+        // 0.155 s a 854×480 frame with the probe at 1.02, 0.384 s a
+        // 3840×2160 frame at 0.95 (`Rates::measured`).
         let per_frame = |factor: f64, w: u32, h: u32| {
             let p = plan(
                 &Input {
@@ -971,19 +1258,19 @@ mod frame_step_tests {
                     fps: None,
                     ..long(100, None)
                 },
-                &Rates::measured(0.05, 0.5e-6, factor),
+                &Rates::measured(StepRates::flat(0.05, 0.5e-6), factor),
                 1e6,
                 &Fixed::default(),
             );
             p.mask_s / 100.0
         };
-        assert!((per_frame(0.39, 854, 480) - 0.155).abs() < 0.01);
-        assert!((per_frame(0.36, 3840, 2160) - 0.384).abs() < 0.02);
+        assert!((per_frame(1.02, 854, 480) - 0.155).abs() < 0.01);
+        assert!((per_frame(0.95, 3840, 2160) - 0.384).abs() < 0.02);
     }
 
     #[test]
     fn short_videos_scenes_and_set_rates_keep_every_frame() {
-        let rates = Rates::measured(0.05, 0.5e-6, 1.0);
+        let rates = Rates::measured(StepRates::flat(0.05, 0.5e-6), 1.0);
         for input in [
             long(65, Some(30.0)),
             long(3640, None),

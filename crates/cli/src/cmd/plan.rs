@@ -7,9 +7,6 @@ use super::train::{BackendKind, make_backend};
 use crate::Ctx;
 use crate::plan::{Fixed, Input, Rates, plan, probe_train_rates};
 
-/// Splats in the training-rate probe (a typical mid-run count).
-const PROBE_SPLATS: usize = 30_000;
-
 /// `romosplat plan`
 #[derive(Debug, clap::Args)]
 pub struct Args {
@@ -53,7 +50,7 @@ pub fn plan_for(
     if fixed.steps.is_some() && fixed.downscale.is_some() {
         let mut p = plan(
             input,
-            &Rates::measured(0.0, 0.0, crate::plan::probe_cpu_factor()?),
+            &Rates::measured(Default::default(), crate::plan::probe_cpu_factor()?),
             budget_minutes * 60.0,
             fixed,
         );
@@ -61,8 +58,8 @@ pub fn plan_for(
         return Ok(p);
     }
     let mut b = make_backend(backend, ctx)?;
-    let (a, per_px) = probe_train_rates(b.as_mut(), input.width, input.height, PROBE_SPLATS)?;
-    let rates = Rates::measured(a, per_px, crate::plan::probe_cpu_factor()?);
+    let train = probe_train_rates(b.as_mut(), input.width, input.height)?;
+    let rates = Rates::measured(train, crate::plan::probe_cpu_factor()?);
     Ok(plan(input, &rates, budget_minutes * 60.0, fixed))
 }
 
@@ -83,6 +80,7 @@ pub fn run(args: &Args, ctx: &Ctx) -> anyhow::Result<serde_json::Value> {
         width: w,
         height: h,
         overlap: colmap.overlap,
+        exhaustive: args.input.exhaustive(args.pose.matcher)?,
         trainings: if args.no_baseline { 1 } else { 2 },
         masks: true,
         fps,

@@ -63,6 +63,15 @@ impl InputArgs {
             }
         }
     }
+
+    /// COLMAP matches every pair: `--matcher` when given, else for a scene
+    /// folder (photos), where a video's frames are matched sequentially.
+    pub fn exhaustive(&self, matcher: Option<pose::Matcher>) -> Result<bool> {
+        Ok(match matcher {
+            Some(m) => m == pose::Matcher::Exhaustive,
+            None => matches!(self.source()?, Source::Scene(_)),
+        })
+    }
 }
 
 /// `romosplat run`
@@ -685,6 +694,7 @@ fn budget(args: &Args, ctx: &Ctx) -> Result<Budget> {
             .pose
             .pose_overlap
             .unwrap_or(pose::ColmapOptions::default().overlap),
+        exhaustive: args.input.exhaustive(args.pose.matcher)?,
         trainings: trainings(args),
         masks: !args.no_masks,
         fps,
