@@ -821,6 +821,18 @@ mod tests {
         }
     }
 
+    /// Every planned value set (500 steps at downscale 4, COLMAP at 640 px
+    /// with 1024 features on every frame).
+    fn all_set() -> Fixed {
+        Fixed {
+            steps: Some(500),
+            downscale: Some(4),
+            pose_stride: Some(1),
+            pose_features: Some(1024),
+            pose_max_image_size: Some(640),
+        }
+    }
+
     /// 0.05 s a step plus 0.5 µs a pixel: 240×135 → 0.066 s a step.
     fn rates() -> Rates {
         Rates::measured(StepRates::flat(0.05, 0.5e-6), 1.0)
@@ -997,13 +1009,7 @@ mod tests {
 
     #[test]
     fn a_slower_cpu_scales_the_mask_and_colmap_estimates() {
-        let f = Fixed {
-            steps: Some(500),
-            downscale: Some(4),
-            pose_stride: Some(1),
-            pose_features: Some(1024),
-            pose_max_image_size: Some(640),
-        };
+        let f = all_set();
         let here = plan(&video(), &rates(), 1200.0, &f);
         let slow = plan(
             &video(),
@@ -1136,13 +1142,7 @@ mod tests {
 
     #[test]
     fn photo_collections_plan_every_pair() {
-        let f = Fixed {
-            steps: Some(500),
-            downscale: Some(4),
-            pose_stride: Some(1),
-            pose_features: Some(1024),
-            pose_max_image_size: Some(640),
-        };
+        let f = all_set();
         let seq = plan(&video(), &rates(), 1e6, &f);
         let all = plan(
             &Input {
