@@ -881,42 +881,22 @@ fn chamfer_distance(mask: &[bool], w: usize) -> Vec<f32> {
         .map(|m| if *m { 0.0 } else { f32::INFINITY })
         .collect();
     let (a, b) = (1.0f32, 4.0 / 3.0);
-    for y in 0..h {
-        for x in 0..w {
-            let i = y * w + x;
-            let mut v = d[i];
-            if x > 0 {
-                v = v.min(d[i - 1] + a);
-            }
-            if y > 0 {
-                v = v.min(d[i - w] + a);
-                if x > 0 {
-                    v = v.min(d[i - w - 1] + b);
-                }
-                if x + 1 < w {
-                    v = v.min(d[i - w + 1] + b);
-                }
-            }
-            d[i] = v;
-        }
-    }
-    for y in (0..h).rev() {
-        for x in (0..w).rev() {
-            let i = y * w + x;
-            let mut v = d[i];
-            if x + 1 < w {
-                v = v.min(d[i + 1] + a);
-            }
-            if y + 1 < h {
-                v = v.min(d[i + w] + a);
-                if x + 1 < w {
-                    v = v.min(d[i + w + 1] + b);
-                }
-                if x > 0 {
-                    v = v.min(d[i + w - 1] + b);
+    // Forward pass: left, up-left, up, up-right; the backward pass mirrors it.
+    let ahead = [(-1, 0, a), (-1, -1, b), (0, -1, a), (1, -1, b)];
+    for forward in [true, false] {
+        let sign = if forward { 1 } else { -1 };
+        for k in 0..w * h {
+            let i = if forward { k } else { w * h - 1 - k };
+            let (x, y) = ((i % w) as isize, (i / w) as isize);
+            for &(dx, dy, c) in &ahead {
+                let (nx, ny) = (x + sign * dx, y + sign * dy);
+                if (0..w as isize).contains(&nx) && (0..h as isize).contains(&ny) {
+                    let v = d[ny as usize * w + nx as usize] + c;
+                    if v < d[i] {
+                        d[i] = v;
+                    }
                 }
             }
-            d[i] = v;
         }
     }
     d
