@@ -11,7 +11,9 @@
 //! ([`mean_splats`]); the mask and COLMAP costs are per-pixel / per-feature
 //! rates measured on the 2-core development machine, scaled by how much
 //! slower or faster this machine's CPU runs the mask stage's optical flow
-//! ([`probe_cpu_factor`], [`Rates::measured`]).
+//! ([`probe_cpu_factor`], [`Rates::measured`]), with the features per image
+//! that COLMAP's matching and mapper cost grow with measured by running its
+//! SIFT on three of the input's frames ([`probe_px_per_feature`]).
 //!
 //! Order of choices:
 //! 1. masks: every frame, full resolution (RoMo needs consecutive frames),
@@ -113,6 +115,9 @@ pub struct Rates {
     pub mapper_s_per_image_kfeature: f64,
     /// COLMAP image undistorter, seconds per pixel of the frames.
     pub undistort_s_per_px: f64,
+    /// Pixels per SIFT feature COLMAP finds on the input's frames at the
+    /// first tier's size: [`probe_px_per_feature`], else [`PX_PER_FEATURE`].
+    pub px_per_feature: f64,
     /// Evaluation, export and report, seconds per training-image pixel
     /// (renders of the held-out views) plus a fixed part.
     pub finish_s: f64,
@@ -147,6 +152,7 @@ impl Rates {
             match_s_per_pair_feature: cpu_factor * 5.3e-5,
             mapper_s_per_image_kfeature: cpu_factor * 0.19,
             undistort_s_per_px: cpu_factor * 0.25e-6,
+            px_per_feature: PX_PER_FEATURE,
             finish_s: 30.0,
             cpu_factor,
         }
@@ -335,6 +341,16 @@ pub struct Plan {
     /// [`Rates::cpu_factor`] of the rates the plan was made with.
     #[serde(default = "one_f64")]
     pub cpu_factor: f64,
+    /// [`Rates::px_per_feature`] of the rates the plan was made with.
+    #[serde(default = "assumed_px_per_feature")]
+    pub px_per_feature: f64,
+    /// SIFT features an image the COLMAP estimate expects.
+    #[serde(default)]
+    pub sift_features: f64,
+}
+
+fn assumed_px_per_feature() -> f64 {
+    PX_PER_FEATURE
 }
 
 /// 2 → "2nd", 3 → "3rd", 11 → "11th", 21 → "21st".
@@ -386,10 +402,12 @@ impl Plan {
                 "masks: none (--no-masks)".into()
             },
             format!(
-                "COLMAP: {posed} frames (stride {}), SIFT ≤ {} px, {} features, {}",
+                "COLMAP: {posed} frames (stride {}), SIFT ≤ {} px, {} features (≈ {:.0} an image, one per {:.0} px), {}",
                 self.pose_stride,
                 self.pose_max_image_size,
                 self.pose_features,
+                self.sift_features,
+                self.px_per_feature,
                 m(self.pose_s)
             ),
             format!(
@@ -435,17 +453,92 @@ impl Plan {
 /// `colmap automatic_reconstructor`'s medium and low quality.
 const POSE_TIERS: [(u32, u32); 4] = [(1600, 4096), (1000, 2048), (640, 1024), (400, 512)];
 
-/// Pixels per SIFT feature COLMAP finds, at most: 133–294 over the 19 runs
-/// of [`Rates::measured`] (a feature cap above that is not reached).
-const PX_PER_FEATURE: f64 = 150.0;
+/// Pixels per SIFT feature assumed when the SIFT probe cannot run: about
+/// the densest of the 19 runs of [`Rates::measured`] (133–294).
+pub const PX_PER_FEATURE: f64 = 150.0;
+
+/// Frames [`probe_px_per_feature`] reads, spread over the input.
+pub const FEATURE_PROBE_FRAMES: usize = 3;
+
+/// The SIFT probe's feature cap: above every tier's, so that it measures the
+/// frames' own density (a tier's cap is applied in the estimate).
+const FEATURE_PROBE_CAP: u32 = 16_384;
+
+/// Long side COLMAP's SIFT would see at the first tier (or at the size the
+/// user set): the size [`probe_px_per_feature`] runs at.
+pub fn probe_sift_size(width: u32, height: u32, fixed: &Fixed) -> u32 {
+    fixed
+        .pose_max_image_size
+        .unwrap_or(POSE_TIERS[0].0)
+        .min(width.max(height))
+}
+
+/// Pixels per SIFT feature on `images` with the long side at most `size`:
+/// `colmap feature_extractor` (CPU, no masks, as the pose stage runs it) on
+/// them in a temporary folder, the keypoints read back from its database.
+/// Without masks it counts the features on moving objects too, so the
+/// estimate errs long.
+pub fn probe_px_per_feature(colmap: &Path, images: &[PathBuf], size: u32) -> anyhow::Result<f64> {
+    use anyhow::Context;
+    anyhow::ensure!(!images.is_empty(), "no frames to probe SIFT on");
+    let dir = tempfile::Builder::new()
+        .prefix("romosplat-sift-probe")
+        .tempdir()
+        .context("temporary folder for the SIFT probe")?;
+    let folder = dir.path().join("images");
+    std::fs::create_dir_all(&folder).with_context(|| folder.display().to_string())?;
+    let mut px = 0.0;
+    for (i, p) in images.iter().enumerate() {
+        let ext = p.extension().and_then(|e| e.to_str()).unwrap_or("png");
+        let to = folder.join(format!("{i:03}.{ext}"));
+        std::fs::copy(p, &to).with_context(|| format!("{}: cannot copy", p.display()))?;
+        let (w, h) = image::image_dimensions(p)
+            .map_err(|e| anyhow::anyhow!("{}: cannot read ({e})", p.display()))?;
+        let s = (f64::from(size) / f64::from(w.max(h))).min(1.0);
+        px += f64::from(w) * f64::from(h) * s * s;
+    }
+    let db = dir.path().join("database.db");
+    let path = |p: &Path| p.to_string_lossy().into_owned();
+    let args: Vec<String> = [
+        ("database_path", path(&db)),
+        ("image_path", path(&folder)),
+        ("SiftExtraction.use_gpu", "0".into()),
+        ("SiftExtraction.max_image_size", size.to_string()),
+        (
+            "SiftExtraction.max_num_features",
+            FEATURE_PROBE_CAP.to_string(),
+        ),
+    ]
+    .into_iter()
+    .flat_map(|(k, v)| [format!("--{k}"), v])
+    .collect();
+    let log = dir.path().join("feature_extractor.log");
+    let out = pose::process::run_step(colmap, "feature_extractor", &args, &log, &mut |_| {})?;
+    pose::process::require_success("feature_extractor", &out)?;
+    let stats = pose::pairs::read_pair_stats(&db)?;
+    anyhow::ensure!(
+        stats.images == images.len(),
+        "COLMAP read {} of the {} probe frames ({})",
+        stats.images,
+        images.len(),
+        pose::process::log_tail(&log, 3)
+    );
+    Ok(px / stats.keypoints.max(1) as f64)
+}
+
+/// Pixels of a frame at SIFT's long side `size`, and the features an image
+/// COLMAP is expected to find there (at most `features`).
+fn sift_image(r: &Rates, inp: &Input, size: u32, features: u32) -> (f64, f64) {
+    let long = f64::from(inp.width.max(inp.height));
+    let s = (f64::from(size) / long).min(1.0);
+    let px = f64::from(inp.width) * f64::from(inp.height) * s * s;
+    (px, f64::from(features).min(px / r.px_per_feature.max(1.0)))
+}
 
 fn pose_seconds(r: &Rates, inp: &Input, stride: usize, size: u32, features: u32) -> f64 {
     let n = inp.frames.div_ceil(stride.max(1)) as f64;
-    let long = f64::from(inp.width.max(inp.height));
-    let s = (f64::from(size) / long).min(1.0);
     let frame_px = f64::from(inp.width) * f64::from(inp.height);
-    let px = frame_px * s * s;
-    let feats = f64::from(features).min(px / PX_PER_FEATURE);
+    let (px, feats) = sift_image(r, inp, size, features);
     let pairs = if inp.exhaustive {
         n * (n - 1.0) / 2.0
     } else {
@@ -635,6 +728,8 @@ pub fn plan(input: &Input, rates: &Rates, budget_s: f64, fixed: &Fixed) -> Plan 
         finish_s,
         train_estimated: true,
         cpu_factor: rates.cpu_factor,
+        px_per_feature: rates.px_per_feature,
+        sift_features: sift_image(rates, input, pose_max_image_size, pose_features).1,
     }
 }
 
@@ -1190,6 +1285,124 @@ mod tests {
             &f,
         );
         assert!((1.0..1.5).contains(&(p.pose_s / 91.2)), "{}", p.pose_s);
+        // At the density that run found (2 017 keypoints an image, masked),
+        // the estimate is close.
+        let found = Rates {
+            px_per_feature: 854.0 * 480.0 / 2017.0,
+            ..Rates::measured(StepRates::default(), 0.92)
+        };
+        let p = plan(&input, &found, 1e6, &f);
+        assert!((0.85..1.15).contains(&(p.pose_s / 91.2)), "{}", p.pose_s);
+        assert!(
+            (p.sift_features - 2017.0).abs() < 1.0,
+            "{}",
+            p.sift_features
+        );
+    }
+
+    /// Matching and the mapper scale with the features the probe expects,
+    /// up to the tier's cap; extraction and undistortion do not.
+    #[test]
+    fn the_colmap_estimate_follows_the_probed_density() {
+        let f = Fixed {
+            pose_max_image_size: Some(854),
+            pose_features: Some(4096),
+            pose_stride: Some(1),
+            ..all_set()
+        };
+        let at = |px_per_feature: f64| {
+            let r = Rates {
+                px_per_feature,
+                ..rates()
+            };
+            plan(&video(), &r, 1e6, &f)
+        };
+        let (sparse, dense, capped) = (at(400.0), at(200.0), at(10.0));
+        let feats = 854.0 * 480.0 / 400.0;
+        assert!((sparse.sift_features - feats).abs() < 1e-6);
+        assert!((dense.sift_features - 2.0 * feats).abs() < 1e-6);
+        assert_eq!(capped.sift_features, 4096.0);
+        let r = rates();
+        let n = video().frames as f64;
+        let pairs = n * 10.0;
+        let per_feature =
+            pairs * r.match_s_per_pair_feature + n * r.mapper_s_per_image_kfeature / 1000.0;
+        let extra = dense.pose_s - sparse.pose_s;
+        assert!((extra - feats * per_feature).abs() < 1e-6, "{extra}");
+        let extra = capped.pose_s - sparse.pose_s;
+        assert!(
+            (extra - (4096.0 - feats) * per_feature).abs() < 1e-6,
+            "{extra}"
+        );
+    }
+
+    /// Frames of `w`×`h`: a smoothed random texture (blocks of a 40th of
+    /// the width) over the leftmost `textured` share of the width, flat grey
+    /// elsewhere; the same texture at every size.
+    fn texture_frames(dir: &Path, w: u32, h: u32, textured: f64) -> Vec<PathBuf> {
+        (0..3u64)
+            .map(|k| {
+                let mut state = 0x9E37_79B9_7F4A_7C15u64 ^ k;
+                let mut next = || {
+                    state = state
+                        .wrapping_mul(6_364_136_223_846_793_005)
+                        .wrapping_add(1_442_695_040_888_963_407);
+                    (state >> 56) as u8
+                };
+                // Random blocks, blurred: corners and blobs for SIFT.
+                let b = (w / 40).max(1);
+                let blocks: Vec<u8> = (0..41 * 41).map(|_| next()).collect();
+                let img = image::GrayImage::from_fn(w, h, |x, y| {
+                    if f64::from(x) < textured * f64::from(w) {
+                        image::Luma([blocks[((y / b) * 41 + x / b) as usize]])
+                    } else {
+                        image::Luma([128])
+                    }
+                });
+                let p = dir.join(format!("{k}.png"));
+                let sigma = 1.5 * w as f32 / 320.0;
+                image::imageops::blur(&img, sigma).save(&p).unwrap();
+                p
+            })
+            .collect()
+    }
+
+    /// The SIFT probe measures the frames' own density: a quarter of the
+    /// texture gives about four times the pixels per feature, and frames at
+    /// twice the size probed at the original size (COLMAP scales them down)
+    /// give about the same density as the originals.
+    #[test]
+    fn the_sift_probe_measures_the_frames_density() {
+        let colmap = Path::new("colmap");
+        if pose::process::colmap_version(colmap).is_err() {
+            assert!(
+                std::env::var_os("CI").is_none(),
+                "CI is set but colmap is missing"
+            );
+            return;
+        }
+        let dir = tempfile::tempdir().unwrap();
+        let (full, quarter, big) = (
+            dir.path().join("full"),
+            dir.path().join("quarter"),
+            dir.path().join("big"),
+        );
+        for d in [&full, &quarter, &big] {
+            std::fs::create_dir_all(d).unwrap();
+        }
+        let full =
+            probe_px_per_feature(colmap, &texture_frames(&full, 320, 240, 1.0), 320).unwrap();
+        let quarter =
+            probe_px_per_feature(colmap, &texture_frames(&quarter, 320, 240, 0.25), 320).unwrap();
+        let big = probe_px_per_feature(colmap, &texture_frames(&big, 640, 480, 1.0), 320).unwrap();
+        assert!((20.0..2000.0).contains(&full), "{full}");
+        assert!((2.5..6.0).contains(&(quarter / full)), "{full} {quarter}");
+        assert!((0.6..1.6).contains(&(big / full)), "{full} {big}");
+        // No frames, and a file COLMAP cannot read, are errors.
+        assert!(probe_px_per_feature(colmap, &[], 320).is_err());
+        let bad = dir.path().join("bad.png");
+        std::fs::write(&bad, b"not a png").unwrap();
+        assert!(probe_px_per_feature(colmap, &[bad], 320).is_err());
     }
 
     #[test]

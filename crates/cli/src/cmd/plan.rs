@@ -5,7 +5,11 @@
 use super::pose::PoseOpts;
 use super::train::{BackendKind, make_backend};
 use crate::Ctx;
-use crate::plan::{Fixed, Input, Rates, plan, probe_train_rates};
+use crate::plan::{
+    FEATURE_PROBE_FRAMES, Fixed, Input, PX_PER_FEATURE, Rates, plan, probe_px_per_feature,
+    probe_sift_size, probe_train_rates,
+};
+use std::path::Path;
 
 /// `romosplat plan`
 #[derive(Debug, clap::Args)]
@@ -33,12 +37,44 @@ pub struct Args {
     pub pose: PoseOpts,
 }
 
-/// Plan for an input with the probed adapter.
+/// Pixels per SIFT feature of the input's frames: [`probe_px_per_feature`]
+/// on [`FEATURE_PROBE_FRAMES`] of them at the size COLMAP's first tier would
+/// use; the assumed [`PX_PER_FEATURE`], with a line saying why, when COLMAP
+/// or the frames cannot be read.
+pub fn feature_density(
+    input: &super::run::InputArgs,
+    ffmpeg: &Path,
+    colmap: &Path,
+    (width, height): (u32, u32),
+    fixed: &Fixed,
+    ctx: &Ctx,
+) -> f64 {
+    let probe = || -> anyhow::Result<f64> {
+        let dir = tempfile::Builder::new()
+            .prefix("romosplat-probe-frames")
+            .tempdir()?;
+        let frames = input.sample_frames(ffmpeg, FEATURE_PROBE_FRAMES, dir.path())?;
+        probe_px_per_feature(colmap, &frames, probe_sift_size(width, height, fixed))
+    };
+    match probe() {
+        Ok(v) => v,
+        Err(e) => {
+            ctx.info(format!(
+                "SIFT probe: {e:#}; assuming one feature per {PX_PER_FEATURE:.0} px"
+            ));
+            PX_PER_FEATURE
+        }
+    }
+}
+
+/// Plan for an input with the probed adapter, `px_per_feature` from
+/// [`feature_density`].
 pub fn plan_for(
     input: &Input,
     budget_minutes: f64,
     fixed: &Fixed,
     backend: BackendKind,
+    px_per_feature: f64,
     ctx: &Ctx,
 ) -> anyhow::Result<crate::plan::Plan> {
     anyhow::ensure!(
@@ -48,18 +84,20 @@ pub fn plan_for(
     // Steps and resolution both set: nothing to plan for training, so no probe
     // (its estimate is then left out of the plan's total).
     if fixed.steps.is_some() && fixed.downscale.is_some() {
-        let mut p = plan(
-            input,
-            &Rates::measured(Default::default(), crate::plan::probe_cpu_factor()?),
-            budget_minutes * 60.0,
-            fixed,
-        );
+        let rates = Rates {
+            px_per_feature,
+            ..Rates::measured(Default::default(), crate::plan::probe_cpu_factor()?)
+        };
+        let mut p = plan(input, &rates, budget_minutes * 60.0, fixed);
         p.train_estimated = false;
         return Ok(p);
     }
     let mut b = make_backend(backend, ctx)?;
     let train = probe_train_rates(b.as_mut(), input.width, input.height)?;
-    let rates = Rates::measured(train, crate::plan::probe_cpu_factor()?);
+    let rates = Rates {
+        px_per_feature,
+        ..Rates::measured(train, crate::plan::probe_cpu_factor()?)
+    };
     Ok(plan(input, &rates, budget_minutes * 60.0, fixed))
 }
 
@@ -85,7 +123,16 @@ pub fn run(args: &Args, ctx: &Ctx) -> anyhow::Result<serde_json::Value> {
         masks: true,
         fps,
     };
-    let p = plan_for(&input, args.budget_minutes, &fixed, args.backend, ctx)?;
+    let ffmpeg = Path::new("ffmpeg");
+    let density = feature_density(&args.input, ffmpeg, &colmap.colmap, (w, h), &fixed, ctx);
+    let p = plan_for(
+        &input,
+        args.budget_minutes,
+        &fixed,
+        args.backend,
+        density,
+        ctx,
+    )?;
     ctx.info(format!("plan for {frames} frames of {w}×{h}:"));
     for l in p.lines() {
         ctx.info(format!("  {l}"));

@@ -64,6 +64,56 @@ impl InputArgs {
         }
     }
 
+    /// Up to `k` frames spread evenly over the input: a scene's image files,
+    /// or a video's frames decoded by ffmpeg into `dir` (the first frame
+    /// alone when the video's frame rate is unknown).
+    pub fn sample_frames(&self, ffmpeg: &Path, k: usize, dir: &Path) -> Result<Vec<PathBuf>> {
+        match self.source()? {
+            Source::Scene(s) => {
+                let images = s.join("images");
+                let names = loader::scene::list_images(&images)?;
+                let k = k.min(names.len());
+                Ok((0..k)
+                    .map(|i| images.join(&names[(2 * i + 1) * names.len() / (2 * k)]))
+                    .collect())
+            }
+            Source::Video(v) => {
+                let info = crate::plan::probe_video(ffmpeg, &v)?;
+                let duration = (info.fps)
+                    .filter(|f| *f > 0.0)
+                    .map(|f| info.frames as f64 / f);
+                let k = if duration.is_some() {
+                    k.min(info.frames)
+                } else {
+                    1
+                };
+                (0..k)
+                    .map(|i| {
+                        let t = duration.map_or(0.0, |d| d * (i as f64 + 0.5) / k as f64);
+                        let out = dir.join(format!("{i:03}.png"));
+                        let run = std::process::Command::new(ffmpeg)
+                            .args(["-hide_banner", "-loglevel", "error", "-nostdin", "-y"])
+                            .args(["-ss", &format!("{t:.3}"), "-i"])
+                            .arg(&v)
+                            .args(["-frames:v", "1"])
+                            .arg(&out)
+                            .output()
+                            .with_context(|| format!("{}: cannot run", ffmpeg.display()))?;
+                        if !run.status.success() || !out.is_file() {
+                            let err = String::from_utf8_lossy(&run.stderr);
+                            bail!(
+                                "{}: ffmpeg decoded no frame at {t:.2} s ({})",
+                                v.display(),
+                                err.split_whitespace().collect::<Vec<_>>().join(" ")
+                            );
+                        }
+                        Ok(out)
+                    })
+                    .collect()
+            }
+        }
+    }
+
     /// COLMAP matches every pair: `--matcher` when given, else for a scene
     /// folder (photos), where a video's frames are matched sequentially.
     pub fn exhaustive(&self, matcher: Option<pose::Matcher>) -> Result<bool> {
@@ -721,7 +771,29 @@ fn budget(args: &Args, ctx: &Ctx) -> Result<Budget> {
     let budget = match recorded {
         Some(r) => r.plan,
         None => {
-            let b = super::plan::plan_for(&input, args.budget_minutes, &fixed, args.backend, ctx)?;
+            // With the scene's own poses COLMAP does not run: nothing to probe.
+            let density = if args.keep_poses {
+                crate::plan::PX_PER_FEATURE
+            } else {
+                let colmap = (args.pose.colmap.clone())
+                    .unwrap_or_else(|| pose::ColmapOptions::default().colmap);
+                super::plan::feature_density(
+                    &args.input,
+                    &args.ffmpeg,
+                    &colmap,
+                    (width, height),
+                    &fixed,
+                    ctx,
+                )
+            };
+            let b = super::plan::plan_for(
+                &input,
+                args.budget_minutes,
+                &fixed,
+                args.backend,
+                density,
+                ctx,
+            )?;
             let rec = RecordedPlan {
                 key,
                 plan: b.clone(),
@@ -945,5 +1017,82 @@ fn print_summary(ctx: &Ctx, plan: &Plan, rows: &[StageRow], results: &Results, t
         ctx.info(splat::lpips_alex::missing_weights_hint(
             splat::lpips_alex::default_weights_path().as_deref(),
         ));
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    fn input(video: Option<PathBuf>, scene: Option<PathBuf>) -> InputArgs {
+        InputArgs { video, scene }
+    }
+
+    /// A scene's samples are its images at the middles of equal parts of
+    /// the name order; a video's are decoded at the middles of equal parts
+    /// of its duration, at the frames' size.
+    #[test]
+    fn probe_frames_are_spread_over_the_input() {
+        let dir = tempfile::tempdir().unwrap();
+        let images = dir.path().join("scene/images");
+        std::fs::create_dir_all(&images).unwrap();
+        for i in 0..10 {
+            image::RgbImage::new(8, 6)
+                .save(images.join(format!("{i:02}.png")))
+                .unwrap();
+        }
+        let scene = input(None, Some(dir.path().join("scene")));
+        let got = scene
+            .sample_frames(Path::new("ffmpeg"), 3, dir.path())
+            .unwrap();
+        let names: Vec<_> = got.iter().map(|p| p.file_name().unwrap()).collect();
+        assert_eq!(names, ["01.png", "05.png", "08.png"]);
+        assert_eq!(
+            scene
+                .sample_frames(Path::new("ffmpeg"), 30, dir.path())
+                .unwrap()
+                .len(),
+            10
+        );
+        if !loader::video::ffmpeg_available() {
+            assert!(
+                std::env::var_os("CI").is_none(),
+                "CI is set but ffmpeg is missing"
+            );
+            return;
+        }
+        // 3 s at 10 fps whose frame number is drawn as text: frames decoded
+        // at 0.5, 1.5 and 2.5 s differ.
+        let v = dir.path().join("clip.mp4");
+        let st = std::process::Command::new("ffmpeg")
+            .args(["-hide_banner", "-loglevel", "error", "-nostdin", "-y"])
+            .args(["-f", "lavfi", "-i", "testsrc=size=64x48:rate=10:duration=3"])
+            .args(["-c:v", "mpeg4"])
+            .arg(&v)
+            .status()
+            .unwrap();
+        assert!(st.success());
+        let out = dir.path().join("frames");
+        std::fs::create_dir_all(&out).unwrap();
+        let got = input(Some(v.clone()), None)
+            .sample_frames(Path::new("ffmpeg"), 3, &out)
+            .unwrap();
+        assert_eq!(got.len(), 3);
+        let pixels: Vec<Vec<u8>> = got
+            .iter()
+            .map(|p| {
+                let img = image::open(p).unwrap().to_rgb8();
+                assert_eq!(img.dimensions(), (64, 48));
+                img.into_raw()
+            })
+            .collect();
+        assert!(pixels[0] != pixels[1] && pixels[1] != pixels[2]);
+        // Not a video: a one-line error naming the file.
+        let bad = dir.path().join("bad.mp4");
+        std::fs::write(&bad, b"nothing").unwrap();
+        let e = input(Some(bad), None)
+            .sample_frames(Path::new("ffmpeg"), 3, &out)
+            .unwrap_err();
+        assert!(format!("{e:#}").contains("bad.mp4"), "{e:#}");
     }
 }
