@@ -37,24 +37,25 @@ pub struct Args {
     pub pose: PoseOpts,
 }
 
+/// What the SIFT probe reads: the input's frames (decoded with `ffmpeg`
+/// from a video) and the `colmap` program the pose stage will run.
+pub struct SiftProbe<'a> {
+    pub input: &'a super::run::InputArgs,
+    pub ffmpeg: &'a Path,
+    pub colmap: &'a Path,
+}
+
 /// Pixels per SIFT feature of the input's frames: [`probe_px_per_feature`]
 /// on [`FEATURE_PROBE_FRAMES`] of them at the size COLMAP's first tier would
 /// use; the assumed [`PX_PER_FEATURE`], with a line saying why, when COLMAP
 /// or the frames cannot be read.
-pub fn feature_density(
-    input: &super::run::InputArgs,
-    ffmpeg: &Path,
-    colmap: &Path,
-    (width, height): (u32, u32),
-    fixed: &Fixed,
-    ctx: &Ctx,
-) -> f64 {
+fn feature_density(sift: &SiftProbe, (width, height): (u32, u32), fixed: &Fixed, ctx: &Ctx) -> f64 {
     let probe = || -> anyhow::Result<f64> {
         let dir = tempfile::Builder::new()
             .prefix("romosplat-probe-frames")
             .tempdir()?;
-        let frames = input.sample_frames(ffmpeg, FEATURE_PROBE_FRAMES, dir.path())?;
-        probe_px_per_feature(colmap, &frames, probe_sift_size(width, height, fixed))
+        let frames = (sift.input).sample_frames(sift.ffmpeg, FEATURE_PROBE_FRAMES, dir.path())?;
+        probe_px_per_feature(sift.colmap, &frames, probe_sift_size(width, height, fixed))
     };
     match probe() {
         Ok(v) => v,
@@ -67,20 +68,23 @@ pub fn feature_density(
     }
 }
 
-/// Plan for an input with the probed adapter, `px_per_feature` from
-/// [`feature_density`].
+/// Plan for an input with the probed adapter and, with `sift` (COLMAP will
+/// run), the frames' probed feature density.
 pub fn plan_for(
     input: &Input,
     budget_minutes: f64,
     fixed: &Fixed,
     backend: BackendKind,
-    px_per_feature: f64,
+    sift: Option<SiftProbe>,
     ctx: &Ctx,
 ) -> anyhow::Result<crate::plan::Plan> {
     anyhow::ensure!(
         budget_minutes > 0.0 && budget_minutes.is_finite(),
         "--budget-minutes must be > 0, got {budget_minutes}"
     );
+    let px_per_feature = sift.map_or(PX_PER_FEATURE, |s| {
+        feature_density(&s, (input.width, input.height), fixed, ctx)
+    });
     // Steps and resolution both set: nothing to plan for training, so no probe
     // (its estimate is then left out of the plan's total).
     if fixed.steps.is_some() && fixed.downscale.is_some() {
@@ -123,14 +127,17 @@ pub fn run(args: &Args, ctx: &Ctx) -> anyhow::Result<serde_json::Value> {
         masks: true,
         fps,
     };
-    let ffmpeg = Path::new("ffmpeg");
-    let density = feature_density(&args.input, ffmpeg, &colmap.colmap, (w, h), &fixed, ctx);
+    let sift = SiftProbe {
+        input: &args.input,
+        ffmpeg: Path::new("ffmpeg"),
+        colmap: &colmap.colmap,
+    };
     let p = plan_for(
         &input,
         args.budget_minutes,
         &fixed,
         args.backend,
-        density,
+        Some(sift),
         ctx,
     )?;
     ctx.info(format!("plan for {frames} frames of {w}×{h}:"));

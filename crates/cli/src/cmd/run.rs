@@ -771,27 +771,20 @@ fn budget(args: &Args, ctx: &Ctx) -> Result<Budget> {
     let budget = match recorded {
         Some(r) => r.plan,
         None => {
+            let colmap =
+                (args.pose.colmap.clone()).unwrap_or_else(|| pose::ColmapOptions::default().colmap);
             // With the scene's own poses COLMAP does not run: nothing to probe.
-            let density = if args.keep_poses {
-                crate::plan::PX_PER_FEATURE
-            } else {
-                let colmap = (args.pose.colmap.clone())
-                    .unwrap_or_else(|| pose::ColmapOptions::default().colmap);
-                super::plan::feature_density(
-                    &args.input,
-                    &args.ffmpeg,
-                    &colmap,
-                    (width, height),
-                    &fixed,
-                    ctx,
-                )
-            };
+            let sift = (!args.keep_poses).then(|| super::plan::SiftProbe {
+                input: &args.input,
+                ffmpeg: &args.ffmpeg,
+                colmap: &colmap,
+            });
             let b = super::plan::plan_for(
                 &input,
                 args.budget_minutes,
                 &fixed,
                 args.backend,
-                density,
+                sift,
                 ctx,
             )?;
             let rec = RecordedPlan {
