@@ -132,11 +132,20 @@ fn interrupted_run_resumes() {
             .count(),
         10
     );
+    // COLMAP 3.8 logs no skip per pair: the first image's kept pairs take
+    // a fraction of a pair actually matched (times relative, so that load
+    // cannot fail the test).
     let matched = log(&paths.work, "sequential_matcher");
-    assert!(
-        matched.contains("Matching image [1/10] in 0.000s"),
-        "{matched}"
-    );
+    let times: Vec<f64> = matched
+        .lines()
+        .filter_map(|l| {
+            let rest = l.strip_prefix("Matching image [")?;
+            rest.split(" in ").nth(1)?.strip_suffix('s')?.parse().ok()
+        })
+        .collect();
+    assert_eq!(times.len(), 10, "{matched}");
+    let slowest = times.iter().copied().fold(0.0, f64::max);
+    assert!(times[0] * 10.0 < slowest, "{matched}");
     assert!(r.registered >= 9, "registered {}/10", r.registered);
 
     // 3. Other matching settings keep the features and clear the matches.
