@@ -980,6 +980,15 @@ mod tests {
                 image::image_dimensions(&frames[0]).unwrap(),
                 "{name}"
             );
+            // The SIFT probe's frames are decoded the same way.
+            let sampled = dir.path().join(format!("{name}.sampled"));
+            std::fs::create_dir_all(&sampled).unwrap();
+            let at = loader::video::extract_frames_at("ffmpeg", &v, &[0.5], &sampled).unwrap();
+            assert_eq!(
+                image::image_dimensions(&at[0]).unwrap(),
+                (info.width, info.height),
+                "{name}"
+            );
         }
     }
 

@@ -217,19 +217,74 @@ fn ffmpeg_frames(
             cmd.args([sync_option, "passthrough"]);
         }
     }
-    filters.extend(tone_map.map(str::to_string));
-    filters.push(SQUARE_PIXELS.to_string());
+    filters.push(frame_filters(tone_map));
     cmd.arg("-vf").arg(filters.join(","));
     cmd.args(["-pix_fmt", "rgb24"]).arg(out.join(FRAME_PATTERN));
-    cmd.output().map_err(|e| {
-        if e.kind() == std::io::ErrorKind::NotFound {
-            LoaderError::External(format!(
-                "{program} not found on PATH; install it (Debian/Ubuntu: apt-get install -y ffmpeg)"
-            ))
-        } else {
-            LoaderError::External(format!("could not run {program}: {e}"))
-        }
-    })
+    cmd.output().map_err(|e| spawn_error(program, e))
+}
+
+/// The filters every extracted frame goes through after frame selection:
+/// HDR tone mapping when given, then square pixels.
+fn frame_filters(tone_map: Option<&str>) -> String {
+    tone_map
+        .into_iter()
+        .chain([SQUARE_PIXELS])
+        .collect::<Vec<_>>()
+        .join(",")
+}
+
+fn spawn_error(program: &str, e: std::io::Error) -> LoaderError {
+    if e.kind() == std::io::ErrorKind::NotFound {
+        LoaderError::External(format!(
+            "{program} not found on PATH; install it (Debian/Ubuntu: apt-get install -y ffmpeg)"
+        ))
+    } else {
+        LoaderError::External(format!("could not run {program}: {e}"))
+    }
+}
+
+/// The frames of `video` at `times` (seconds), decoded as
+/// [`extract_frames_with`] decodes them (HDR tone-mapped, square pixels,
+/// 8-bit RGB), as `out_dir/000.png`, `001.png`, … in the order of `times`.
+pub fn extract_frames_at(
+    program: &str,
+    video: &Path,
+    times: &[f64],
+    out_dir: &Path,
+) -> Result<Vec<PathBuf>> {
+    if !video.is_file() {
+        return Err(LoaderError::Missing {
+            path: video.to_path_buf(),
+            context: "video".into(),
+        });
+    }
+    let hdr = hdr_of(program, video);
+    let tone_map = hdr.as_ref().filter(|h| h.tone_mapped).map(Hdr::filters);
+    let filters = frame_filters(tone_map.as_deref());
+    times
+        .iter()
+        .enumerate()
+        .map(|(i, t)| {
+            let out = out_dir.join(format!("{i:03}.png"));
+            let output = Command::new(program)
+                .args(["-hide_banner", "-loglevel", "error", "-nostdin", "-y"])
+                .args(["-ss", &format!("{t:.3}"), "-i"])
+                .arg(video)
+                .args(["-frames:v", "1", "-vf", &filters, "-pix_fmt", "rgb24"])
+                .arg(&out)
+                .output()
+                .map_err(|e| spawn_error(program, e))?;
+            if !output.status.success() || !out.is_file() {
+                let err = String::from_utf8_lossy(&output.stderr);
+                return Err(LoaderError::External(format!(
+                    "{program} decoded no frame of {} at {t:.2} s: {}",
+                    video.display(),
+                    err.split_whitespace().collect::<Vec<_>>().join(" ")
+                )));
+            }
+            Ok(out)
+        })
+        .collect()
 }
 
 /// `ffprobe` next to `program` (or on PATH) on the video's first stream

@@ -87,29 +87,11 @@ impl InputArgs {
                 } else {
                     1
                 };
-                (0..k)
-                    .map(|i| {
-                        let t = duration.map_or(0.0, |d| d * (i as f64 + 0.5) / k as f64);
-                        let out = dir.join(format!("{i:03}.png"));
-                        let run = std::process::Command::new(ffmpeg)
-                            .args(["-hide_banner", "-loglevel", "error", "-nostdin", "-y"])
-                            .args(["-ss", &format!("{t:.3}"), "-i"])
-                            .arg(&v)
-                            .args(["-frames:v", "1"])
-                            .arg(&out)
-                            .output()
-                            .with_context(|| format!("{}: cannot run", ffmpeg.display()))?;
-                        if !run.status.success() || !out.is_file() {
-                            let err = String::from_utf8_lossy(&run.stderr);
-                            bail!(
-                                "{}: ffmpeg decoded no frame at {t:.2} s ({})",
-                                v.display(),
-                                err.split_whitespace().collect::<Vec<_>>().join(" ")
-                            );
-                        }
-                        Ok(out)
-                    })
-                    .collect()
+                let times: Vec<f64> = (0..k)
+                    .map(|i| duration.map_or(0.0, |d| d * (i as f64 + 0.5) / k as f64))
+                    .collect();
+                let program = ffmpeg.to_string_lossy();
+                Ok(loader::video::extract_frames_at(&program, &v, &times, dir)?)
             }
         }
     }
