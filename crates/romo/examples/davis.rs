@@ -4,7 +4,8 @@
 //! precision / recall per sequence as JSON. Options may be overridden with
 //! a partial JSON `RomoOptions` in `$ROMO_OPTS`; `$SEQS` restricts to a
 //! comma-separated list. `$FRAME_STEP` N (default 1) keeps every N-th frame
-//! (0, N, 2N, …), N times the motion per pair; J is scored on those frames.
+//! (0, N, 2N, …), N times the motion per pair; `$MAXF` N keeps the first N
+//! of those (a short clip); J is scored on the frames kept.
 use std::path::PathBuf;
 
 mod common;
@@ -31,6 +32,7 @@ fn run() -> Res<()> {
     let opts = common::romo_options()?;
     let only = common::sequences();
     let step = common::frame_step()?;
+    let maxf: usize = common::env_or("MAXF", usize::MAX)?;
     let mut rows = vec![];
     let mut js = vec![];
     let imgs = davis.join("JPEGImages/480p");
@@ -39,7 +41,11 @@ fn run() -> Res<()> {
         if only.as_ref().is_some_and(|o| !o.contains(&s)) {
             continue;
         }
-        let paths: Vec<PathBuf> = sorted_entries(&dir)?.into_iter().step_by(step).collect();
+        let paths: Vec<PathBuf> = sorted_entries(&dir)?
+            .into_iter()
+            .step_by(step)
+            .take(maxf)
+            .collect();
         let names: Vec<String> = paths.iter().map(|p| common::file_name(p)).collect();
         let t = std::time::Instant::now();
         let rep = romo::segment_paths(&paths, &names, &out.join(&s), &opts, &|_, _, _| {})?;
