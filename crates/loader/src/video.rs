@@ -208,8 +208,7 @@ fn ffmpeg_frames(
     sync_option: &str,
 ) -> Result<std::process::Output> {
     let mut cmd = Command::new(program);
-    cmd.args(["-hide_banner", "-loglevel", "error", "-nostdin", "-y", "-i"])
-        .arg(video);
+    cmd.args(QUIET).arg("-i").arg(video);
     let mut filters: Vec<String> = Vec::new();
     match fps {
         Some(f) => filters.push(format!("fps={f}")),
@@ -222,6 +221,9 @@ fn ffmpeg_frames(
     cmd.args(["-pix_fmt", "rgb24"]).arg(out.join(FRAME_PATTERN));
     cmd.output().map_err(|e| spawn_error(program, e))
 }
+
+/// ffmpeg options of every extraction: errors only, no prompt, overwrite.
+const QUIET: [&str; 5] = ["-hide_banner", "-loglevel", "error", "-nostdin", "-y"];
 
 /// The filters every extracted frame goes through after frame selection:
 /// HDR tone mapping when given, then square pixels.
@@ -267,7 +269,7 @@ pub fn extract_frames_at(
         .map(|(i, t)| {
             let out = out_dir.join(format!("{i:03}.png"));
             let output = Command::new(program)
-                .args(["-hide_banner", "-loglevel", "error", "-nostdin", "-y"])
+                .args(QUIET)
                 .args(["-ss", &format!("{t:.3}"), "-i"])
                 .arg(video)
                 .args(["-frames:v", "1", "-vf", &filters, "-pix_fmt", "rgb24"])

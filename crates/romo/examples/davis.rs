@@ -32,7 +32,7 @@ fn run() -> Res<()> {
     let opts = common::romo_options()?;
     let only = common::sequences();
     let step = common::frame_step()?;
-    let maxf: usize = common::env_or("MAXF", usize::MAX)?;
+    let maxf: usize = common::max_frames()?;
     let mut rows = vec![];
     let mut js = vec![];
     let imgs = davis.join("JPEGImages/480p");

@@ -62,7 +62,7 @@ fn run() -> Res<()> {
     let mut opts = common::romo_options()?;
     opts.record_stages = true;
     let only = common::sequences();
-    let maxf: usize = common::env_or("MAXF", usize::MAX)?;
+    let maxf: usize = common::max_frames()?;
     let step = common::frame_step()?;
     let data = loader::davis::Davis::open(&davis, "480p")
         .map_err(|e| format!("{}: {e}", davis.display()))?;

@@ -60,6 +60,15 @@ pub fn frame_step() -> Res<usize> {
     }
 }
 
+/// `$MAXF`: keep only the first N frames, a short clip (default all);
+/// fewer than 2 is an error, as RoMo needs a pair.
+pub fn max_frames() -> Res<usize> {
+    match env_or("MAXF", usize::MAX)? {
+        n @ (0 | 1) => Err(format!("MAXF={n}: need at least 2 frames").into()),
+        n => Ok(n),
+    }
+}
+
 /// `$SEQS`: the comma-separated sequences to run (None: all).
 pub fn sequences() -> Option<Vec<String>> {
     std::env::var("SEQS")
