@@ -31,6 +31,9 @@
 //! forward flow lands on in the next frame with `λ_t`: an object found
 //! confidently in some frames carries its label along the flow to frames
 //! where its evidence is weak, forward and backward alike.
+//!
+//! As in GrabCut, the colour models are then learnt again from the cut's
+//! own masks and the cut is solved again (`colour_rounds`).
 
 use crate::flow::Flow;
 use crate::maxflow::Graph;
@@ -145,6 +148,14 @@ pub struct ObjectOptions {
     /// 1)` (default 1; 0 = only moving is carried).
     #[cfg_attr(feature = "cli", arg(skip))]
     pub propagation_static_weight: f32,
+    /// Rounds of GrabCut's re-estimation (default 1; 0 = off): the colour
+    /// models are learnt again from the cut's own masks (moving: the cut's
+    /// moving pixels, no longer U or positive evidence) and the cut is
+    /// solved again. Mean J over seeds 0–2: DAVIS 0.702 → 0.704, demo
+    /// 0.897 → 0.904, fox + DAVIS composite 0.874 → 0.886; two rounds add
+    /// nothing (DAVIS seed 0 0.712 → 0.711).
+    #[cfg_attr(feature = "cli", arg(skip))]
+    pub colour_rounds: usize,
 }
 
 impl Default for ObjectOptions {
@@ -169,6 +180,7 @@ impl Default for ObjectOptions {
             propagation_decay: 0.8,
             propagation_passes: 2,
             propagation_static_weight: 1.0,
+            colour_rounds: 1,
         }
     }
 }
@@ -345,8 +357,12 @@ const COLOUR_PRIOR: f64 = 32.0;
 /// scaled to [`COLOUR_PRIOR`] samples: an object whose colour also occurs
 /// elsewhere in the video (a tan animal before a tan wall) is still told
 /// apart from what surrounds it, as in GrabCut's per-image models.
-fn colour_evidence(e: &Evidence, a: &[Vec<f32>], o: &ObjectOptions) -> Vec<Vec<f32>> {
-    let n = a.len();
+fn colour_evidence(
+    e: &Evidence,
+    fg_side: &(dyn Fn(usize, usize) -> bool + Sync),
+    o: &ObjectOptions,
+) -> Vec<Vec<f32>> {
+    let n = e.probs.len();
     let (w, h) = (e.probs[0].w, e.probs[0].h);
     let np = w * h;
     let nb = BINS * BINS * BINS;
@@ -354,7 +370,6 @@ fn colour_evidence(e: &Evidence, a: &[Vec<f32>], o: &ObjectOptions) -> Vec<Vec<f
         .into_par_iter()
         .map(|t| (0..np).map(|i| colour_bin(&e.rgb[t], i) as u16).collect())
         .collect();
-    let fg_side = |t: usize, i: usize| e.u[t][i] || (a[t][i] > 0.0 && !e.l[t][i]);
     let (mut gf, mut gb) = (vec![0f64; nb], vec![0f64; nb]);
     for (t, bt) in bins.iter().enumerate() {
         for (i, b) in bt.iter().enumerate() {
@@ -450,8 +465,27 @@ pub fn graph_cut(e: &Evidence, o: &ObjectOptions) -> Vec<Vec<bool>> {
     if e.probs.is_empty() {
         return Vec::new();
     }
-    let a = unary(e, o);
+    let mut a = unary(e, o);
     let mut masks = solve(e, o, &a);
+    // GrabCut's re-estimation: the colour models learnt from the cut.
+    if o.colour_weight > 0.0 && o.colour_rounds > 0 {
+        let base = evidence_without_colour(e, o);
+        for _ in 0..o.colour_rounds {
+            let seeds = |t: usize, i: usize| masks[t][i];
+            let c = colour_evidence(e, &seeds, o);
+            a = base
+                .par_iter()
+                .zip(&c)
+                .map(|(bt, ct)| {
+                    bt.iter()
+                        .zip(ct)
+                        .map(|(b, c)| b + o.colour_weight * c)
+                        .collect()
+                })
+                .collect();
+            masks = solve(e, o, &a);
+        }
+    }
     if o.propagation_frames == 0 || o.propagation_weight <= 0.0 {
         return masks;
     }
@@ -541,20 +575,27 @@ pub fn propagation_prior(masks: &[Vec<bool>], e: &Evidence, o: &ObjectOptions) -
 
 /// Unary evidence `a` per frame and pixel (module doc).
 fn unary(e: &Evidence, o: &ObjectOptions) -> Vec<Vec<f32>> {
+    let mut a = evidence_without_colour(e, o);
+    if o.colour_weight > 0.0 {
+        let seeds = |t: usize, i: usize| e.u[t][i] || (a[t][i] > 0.0 && !e.l[t][i]);
+        let c = colour_evidence(e, &seeds, o);
+        a.par_iter_mut().zip(&c).for_each(|(at, ct)| {
+            for (ai, ci) in at.iter_mut().zip(ct) {
+                *ai += o.colour_weight * ci;
+            }
+        });
+    }
+    a
+}
+
+/// The geometric, MLP and superpixel terms of the unary evidence.
+fn evidence_without_colour(e: &Evidence, o: &ObjectOptions) -> Vec<Vec<f32>> {
     let mut a = base_evidence(e, o);
     if o.superpixel_weight > 0.0 {
         let r = superpixel_votes(e, o);
         a.par_iter_mut().zip(&r).for_each(|(at, rt)| {
             for (ai, ri) in at.iter_mut().zip(rt) {
                 *ai += o.superpixel_weight * ri;
-            }
-        });
-    }
-    if o.colour_weight > 0.0 {
-        let c = colour_evidence(e, &a, o);
-        a.par_iter_mut().zip(&c).for_each(|(at, ct)| {
-            for (ai, ci) in at.iter_mut().zip(ct) {
-                *ai += o.colour_weight * ci;
             }
         });
     }
@@ -759,6 +800,93 @@ mod tests {
         let m = graph_cut(&e, &off);
         assert!(m[0].iter().all(|b| !b));
         assert!((0..w * h).filter(|&i| m[5][i]).count() == 100);
+    }
+
+    /// GrabCut's re-estimation (`colour_rounds`): the MLP paints a ring of
+    /// background colour around a moving square and a small island of the
+    /// same colour inside a static patch of another colour. The first
+    /// colour model takes both as moving seeds, so background colour looks
+    /// half moving and the island is cut as moving. The cut drops the ring
+    /// (it is tied to the static background around it); the model learnt
+    /// again from the cut is purer and the second cut drops the island too.
+    #[test]
+    fn colour_models_learnt_from_the_cut_drop_a_false_island() {
+        let (w, h) = (48, 40);
+        let obj = |x: usize, y: usize| (6..18).contains(&x) && (6..18).contains(&y);
+        let ring = |x: usize, y: usize| (4..20).contains(&x) && (4..20).contains(&y) && !obj(x, y);
+        let patch = |x: usize, y: usize| (28..44).contains(&x) && (20..36).contains(&y);
+        let island = |x: usize, y: usize| (34..39).contains(&x) && (26..31).contains(&y);
+        let rgb = vec![flat_rgb(w, h, |x, y| {
+            if obj(x, y) {
+                0.8
+            } else if patch(x, y) && !island(x, y) {
+                0.5
+            } else {
+                0.2
+            }
+        })];
+        let at = |i: usize| (i % w, i / w);
+        let s: Vec<f32> = (0..w * h)
+            .map(|i| {
+                let (x, y) = at(i);
+                if obj(x, y) {
+                    3.0
+                } else if ring(x, y) || island(x, y) {
+                    f32::NAN
+                } else {
+                    0.01
+                }
+            })
+            .collect();
+        let probs = vec![Plane::from_fn(w, h, |x, y| {
+            if obj(x, y) || island(x, y) {
+                0.88
+            } else if ring(x, y) {
+                0.8
+            } else {
+                0.1
+            }
+        })];
+        let u: Vec<bool> = (0..w * h).map(|i| obj(at(i).0, at(i).1)).collect();
+        let l: Vec<bool> = s.iter().map(|r| *r < 0.1).collect();
+        let textured = vec![vec![true; w * h]];
+        let e = Evidence {
+            probs: &probs,
+            s: vec![&s],
+            v: vec![1.0],
+            textured: &textured,
+            u: vec![&u],
+            l: vec![&l],
+            rgb: &rgb,
+            fwd: &[],
+            valid_f: &[],
+            bwd: &[],
+            valid_b: &[],
+            u_factor: 1.0,
+            l_factor: 0.1,
+            geometry_zero: None,
+        };
+        let count = |m: &[bool], f: &dyn Fn(usize, usize) -> bool| {
+            (0..w * h).filter(|&i| m[i] && f(at(i).0, at(i).1)).count()
+        };
+        let once = ObjectOptions {
+            colour_rounds: 0,
+            ..Default::default()
+        };
+        let m = graph_cut(&e, &once);
+        assert_eq!(count(&m[0], &obj), 144);
+        assert_eq!(count(&m[0], &ring), 0);
+        assert_eq!(count(&m[0], &island), 25);
+        let again = ObjectOptions {
+            colour_rounds: 1,
+            ..once
+        };
+        let m = graph_cut(&e, &again);
+        let wrong: Vec<(usize, usize)> = (0..w * h)
+            .filter(|&i| m[0][i] != obj(at(i).0, at(i).1))
+            .map(at)
+            .collect();
+        assert!(wrong.is_empty(), "{wrong:?}");
     }
 
     /// An object with sparse confident motion (every 10th pixel U, the
