@@ -694,6 +694,34 @@ fn solve(e: &Evidence, o: &ObjectOptions, a: &[Vec<f32>]) -> Vec<Vec<bool>> {
 mod tests {
     use super::*;
 
+    /// The evidence of a single frame (no flow), RoMo's default factors.
+    fn one_frame<'a>(
+        probs: &'a [Plane],
+        s: &'a [f32],
+        v: f32,
+        textured: &'a [Vec<bool>],
+        u: &'a [bool],
+        l: &'a [bool],
+        rgb: &'a [Rgb],
+    ) -> Evidence<'a> {
+        Evidence {
+            probs,
+            s: vec![s],
+            v: vec![v],
+            textured,
+            u: vec![u],
+            l: vec![l],
+            rgb,
+            fwd: &[],
+            valid_f: &[],
+            bwd: &[],
+            valid_b: &[],
+            u_factor: 1.0,
+            l_factor: 0.1,
+            geometry_zero: None,
+        }
+    }
+
     fn flat_rgb(w: usize, h: usize, f: impl Fn(usize, usize) -> f32 + Sync) -> Rgb {
         let p = Plane::from_fn(w, h, f);
         Rgb {
@@ -853,22 +881,7 @@ mod tests {
         let u: Vec<bool> = (0..w * h).map(|i| obj(at(i).0, at(i).1)).collect();
         let l: Vec<bool> = s.iter().map(|r| *r < 0.1).collect();
         let textured = vec![vec![true; w * h]];
-        let e = Evidence {
-            probs: &probs,
-            s: vec![&s],
-            v: vec![1.0],
-            textured: &textured,
-            u: vec![&u],
-            l: vec![&l],
-            rgb: &rgb,
-            fwd: &[],
-            valid_f: &[],
-            bwd: &[],
-            valid_b: &[],
-            u_factor: 1.0,
-            l_factor: 0.1,
-            geometry_zero: None,
-        };
+        let e = one_frame(&probs, &s, 1.0, &textured, &u, &l, &rgb);
         let count = |m: &[bool], f: &dyn Fn(usize, usize) -> bool| {
             (0..w * h).filter(|&i| m[i] && f(at(i).0, at(i).1)).count()
         };
@@ -913,22 +926,7 @@ mod tests {
         let l: Vec<bool> = (0..w * h).map(|i| !obj(i)).collect();
         let probs = vec![Plane::filled(w, h, 0.3)];
         let textured = vec![vec![true; w * h]];
-        let e = Evidence {
-            probs: &probs,
-            s: vec![&s],
-            v: vec![v],
-            textured: &textured,
-            u: vec![&u],
-            l: vec![&l],
-            rgb: &rgb,
-            fwd: &[],
-            valid_f: &[],
-            bwd: &[],
-            valid_b: &[],
-            u_factor: 1.0,
-            l_factor: 0.1,
-            geometry_zero: None,
-        };
+        let e = one_frame(&probs, &s, v, &textured, &u, &l, &rgb);
         let o = ObjectOptions {
             colour_weight: 0.0,
             temporal: 0.0,
