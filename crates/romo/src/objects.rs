@@ -468,24 +468,21 @@ pub fn graph_cut(e: &Evidence, o: &ObjectOptions) -> Vec<Vec<bool>> {
     if e.probs.is_empty() {
         return Vec::new();
     }
-    let mut a = unary(e, o);
+    let base = evidence_without_colour(e, o);
+    // The colour term from seeds (`seeds(t, i)`: moving), added to `base`.
+    let with_colour = |seeds: &(dyn Fn(usize, usize) -> bool + Sync)| {
+        let mut a = base.clone();
+        if o.colour_weight > 0.0 {
+            add_scaled(&mut a, o.colour_weight, &colour_evidence(e, seeds, o));
+        }
+        a
+    };
+    let mut a = with_colour(&|t, i| e.u[t][i] || (base[t][i] > 0.0 && !e.l[t][i]));
     let mut masks = solve(e, o, &a);
     // GrabCut's re-estimation: the colour models learnt from the cut.
-    if o.colour_weight > 0.0 && o.colour_rounds > 0 {
-        let base = evidence_without_colour(e, o);
+    if o.colour_weight > 0.0 {
         for _ in 0..o.colour_rounds {
-            let seeds = |t: usize, i: usize| masks[t][i];
-            let c = colour_evidence(e, &seeds, o);
-            a = base
-                .par_iter()
-                .zip(&c)
-                .map(|(bt, ct)| {
-                    bt.iter()
-                        .zip(ct)
-                        .map(|(b, c)| b + o.colour_weight * c)
-                        .collect()
-                })
-                .collect();
+            a = with_colour(&|t, i| masks[t][i]);
             masks = solve(e, o, &a);
         }
     }
@@ -493,17 +490,12 @@ pub fn graph_cut(e: &Evidence, o: &ObjectOptions) -> Vec<Vec<bool>> {
         return masks;
     }
     for _ in 0..o.propagation_passes {
-        let prior = propagation_prior(&masks, e, o);
-        let with: Vec<Vec<f32>> = a
-            .par_iter()
-            .zip(&prior)
-            .map(|(at, pt)| {
-                at.iter()
-                    .zip(pt)
-                    .map(|(ai, pi)| ai + o.propagation_weight * pi)
-                    .collect()
-            })
-            .collect();
+        let mut with = a.clone();
+        add_scaled(
+            &mut with,
+            o.propagation_weight,
+            &propagation_prior(&masks, e, o),
+        );
         masks = solve(e, o, &with);
     }
     masks
@@ -576,31 +568,20 @@ pub fn propagation_prior(masks: &[Vec<bool>], e: &Evidence, o: &ObjectOptions) -
         .collect()
 }
 
-/// Unary evidence `a` per frame and pixel (module doc).
-fn unary(e: &Evidence, o: &ObjectOptions) -> Vec<Vec<f32>> {
-    let mut a = evidence_without_colour(e, o);
-    if o.colour_weight > 0.0 {
-        let seeds = |t: usize, i: usize| e.u[t][i] || (a[t][i] > 0.0 && !e.l[t][i]);
-        let c = colour_evidence(e, &seeds, o);
-        a.par_iter_mut().zip(&c).for_each(|(at, ct)| {
-            for (ai, ci) in at.iter_mut().zip(ct) {
-                *ai += o.colour_weight * ci;
-            }
-        });
-    }
-    a
+/// `a += w · b`, per frame and pixel.
+fn add_scaled(a: &mut [Vec<f32>], w: f32, b: &[Vec<f32>]) {
+    a.par_iter_mut().zip(b).for_each(|(at, bt)| {
+        for (ai, bi) in at.iter_mut().zip(bt) {
+            *ai += w * bi;
+        }
+    });
 }
 
 /// The geometric, MLP and superpixel terms of the unary evidence.
 fn evidence_without_colour(e: &Evidence, o: &ObjectOptions) -> Vec<Vec<f32>> {
     let mut a = base_evidence(e, o);
     if o.superpixel_weight > 0.0 {
-        let r = superpixel_votes(e, o);
-        a.par_iter_mut().zip(&r).for_each(|(at, rt)| {
-            for (ai, ri) in at.iter_mut().zip(rt) {
-                *ai += o.superpixel_weight * ri;
-            }
-        });
+        add_scaled(&mut a, o.superpixel_weight, &superpixel_votes(e, o));
     }
     a
 }
