@@ -154,7 +154,7 @@ pub struct ObjectOptions {
     /// Rounds of GrabCut's re-estimation (default 1; 0 = off): the colour
     /// models are learnt again from the cut's own masks (moving: the cut's
     /// moving pixels, no longer U or positive evidence) and the cut is
-    /// solved again. Mean J over seeds 0–2: DAVIS 0.702 → 0.704, demo
+    /// solved again. Mean J over seeds 0–2 at `λ_s` 1: DAVIS 0.702 → 0.704, demo
     /// 0.897 → 0.904, fox + DAVIS composite 0.874 → 0.886; two rounds add
     /// nothing (DAVIS seed 0 0.712 → 0.711).
     #[cfg_attr(feature = "cli", arg(skip))]
@@ -352,9 +352,10 @@ fn superpixel_votes(e: &Evidence, o: &ObjectOptions) -> Vec<Vec<f32>> {
 const COLOUR_PRIOR: f64 = 32.0;
 
 /// Colour evidence `c` per frame and pixel: the log ratio of a foreground
-/// and a background colour histogram, ÷ 2, clamped to ±1. Seeds: a pixel
-/// is foreground when it is U or its evidence `a` is positive and it is
-/// not L; background otherwise. With `colour_tile` > 0 each pixel's
+/// and a background colour histogram, ÷ 2, clamped to ±1. A pixel is a
+/// foreground seed when `fg_side(frame, pixel)` (first U, or positive
+/// evidence and not L; in the re-estimation, the cut's moving pixels), a
+/// background seed otherwise. With `colour_tile` > 0 each pixel's
 /// histograms count the seeds of its tile and the 8 around it in the
 /// frames within `colour_frames` of its own, plus the video's histograms
 /// scaled to [`COLOUR_PRIOR`] samples: an object whose colour also occurs
