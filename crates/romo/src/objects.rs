@@ -351,7 +351,19 @@ fn superpixel_votes(e: &Evidence, o: &ObjectOptions) -> Vec<Vec<f32>> {
 /// Pseudo-samples of the video's colour model in each local model.
 const COLOUR_PRIOR: f64 = 32.0;
 
-/// Colour evidence `c` per frame and pixel: the log ratio of a foreground
+/// Each frame's colour histogram bin per pixel.
+fn colour_bins(e: &Evidence) -> Vec<Vec<u16>> {
+    e.rgb[..e.probs.len()]
+        .par_iter()
+        .map(|rgb| {
+            (0..rgb.c[0].data.len())
+                .map(|i| colour_bin(rgb, i) as u16)
+                .collect()
+        })
+        .collect()
+}
+
+/// Colour evidence `c` per frame and pixel (`bins`: [`colour_bins`]): the log ratio of a foreground
 /// and a background colour histogram, ÷ 2, clamped to ±1. A pixel is a
 /// foreground seed when `fg_side(frame, pixel)` (first U, or positive
 /// evidence and not L; in the re-estimation, the cut's moving pixels), a
@@ -363,17 +375,14 @@ const COLOUR_PRIOR: f64 = 32.0;
 /// apart from what surrounds it, as in GrabCut's per-image models.
 fn colour_evidence(
     e: &Evidence,
+    bins: &[Vec<u16>],
     fg_side: &(dyn Fn(usize, usize) -> bool + Sync),
     o: &ObjectOptions,
 ) -> Vec<Vec<f32>> {
-    let n = e.probs.len();
+    let n = bins.len();
     let (w, h) = (e.probs[0].w, e.probs[0].h);
     let np = w * h;
     let nb = BINS * BINS * BINS;
-    let bins: Vec<Vec<u16>> = (0..n)
-        .into_par_iter()
-        .map(|t| (0..np).map(|i| colour_bin(&e.rgb[t], i) as u16).collect())
-        .collect();
     let (mut gf, mut gb) = (vec![0f64; nb], vec![0f64; nb]);
     for (t, bt) in bins.iter().enumerate() {
         for (i, b) in bt.iter().enumerate() {
@@ -470,21 +479,32 @@ pub fn graph_cut(e: &Evidence, o: &ObjectOptions) -> Vec<Vec<bool>> {
         return Vec::new();
     }
     let base = evidence_without_colour(e, o);
+    let bins = if o.colour_weight > 0.0 {
+        colour_bins(e)
+    } else {
+        Vec::new()
+    };
     // The colour term from seeds (`seeds(t, i)`: moving), added to `base`.
     let with_colour = |seeds: &(dyn Fn(usize, usize) -> bool + Sync)| {
         let mut a = base.clone();
         if o.colour_weight > 0.0 {
-            add_scaled(&mut a, o.colour_weight, &colour_evidence(e, seeds, o));
+            add_scaled(
+                &mut a,
+                o.colour_weight,
+                &colour_evidence(e, &bins, seeds, o),
+            );
         }
         a
     };
+    // The pairwise edges are the same in every cut; only terminals change.
+    let pairs = pairwise(e, o);
     let mut a = with_colour(&|t, i| e.u[t][i] || (base[t][i] > 0.0 && !e.l[t][i]));
-    let mut masks = solve(e, o, &a);
+    let mut masks = solve(&pairs, &a);
     // GrabCut's re-estimation: the colour models learnt from the cut.
     if o.colour_weight > 0.0 {
         for _ in 0..o.colour_rounds {
             a = with_colour(&|t, i| masks[t][i]);
-            masks = solve(e, o, &a);
+            masks = solve(&pairs, &a);
         }
     }
     if o.propagation_frames == 0 || o.propagation_weight <= 0.0 {
@@ -497,7 +517,7 @@ pub fn graph_cut(e: &Evidence, o: &ObjectOptions) -> Vec<Vec<bool>> {
             o.propagation_weight,
             &propagation_prior(&masks, e, o),
         );
-        masks = solve(e, o, &with);
+        masks = solve(&pairs, &with);
     }
     masks
 }
@@ -587,13 +607,11 @@ fn evidence_without_colour(e: &Evidence, o: &ObjectOptions) -> Vec<Vec<f32>> {
     a
 }
 
-/// The minimum cut of the space–time graph with unary evidence `a`.
-fn solve(e: &Evidence, o: &ObjectOptions, a: &[Vec<f32>]) -> Vec<Vec<bool>> {
-    let n = a.len();
-    let (w, h) = (e.probs[0].w, e.probs[0].h);
-    let np = w * h;
-    let mut g = Graph::new(n * np);
-    g.reserve_edges(n * np * 3);
+/// The minimum cut of the space–time graph `pairs` ([`pairwise`]) with
+/// unary evidence `a`.
+fn solve(pairs: &Graph, a: &[Vec<f32>]) -> Vec<Vec<bool>> {
+    let np = a.first().map_or(1, Vec::len).max(1);
+    let mut g = pairs.clone();
     for (t, at) in a.iter().enumerate() {
         for (i, ai) in at.iter().enumerate() {
             let c = (ai.abs() * SCALE).round() as i32;
@@ -604,6 +622,17 @@ fn solve(e: &Evidence, o: &ObjectOptions, a: &[Vec<f32>]) -> Vec<Vec<bool>> {
             }
         }
     }
+    let cut = g.max_flow();
+    cut.source_side.chunks(np).map(|c| c.to_vec()).collect()
+}
+
+/// The space–time graph's pairwise edges (module doc), without terminals.
+fn pairwise(e: &Evidence, o: &ObjectOptions) -> Graph {
+    let n = e.probs.len();
+    let (w, h) = (e.probs[0].w, e.probs[0].h);
+    let np = w * h;
+    let mut g = Graph::new(n * np);
+    g.reserve_edges(n * np * 3);
     if o.smoothness > 0.0 {
         for (t, rgb) in e.rgb.iter().enumerate().take(n) {
             let d2 = |i: usize, j: usize| -> f32 {
@@ -668,8 +697,7 @@ fn solve(e: &Evidence, o: &ObjectOptions, a: &[Vec<f32>]) -> Vec<Vec<bool>> {
             }
         }
     }
-    let cut = g.max_flow();
-    cut.source_side.chunks(np).map(|c| c.to_vec()).collect()
+    g
 }
 
 #[cfg(test)]
