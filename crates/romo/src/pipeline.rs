@@ -861,14 +861,22 @@ fn apply_occlusion(
 }
 
 /// A frame's unlabelled pixels (neither U nor L) at least `fraction` of
-/// the grid's longer side from its nearest U pixel (all of them when the
-/// frame has no U), in pixel order.
-fn far_unlabelled(fl: &FrameLabels, w: usize, fraction: f32) -> Vec<usize> {
+/// the grid's longer side from the nearest pixel of `near_u` (all of them
+/// when it is empty), in pixel order.
+fn far_unlabelled(fl: &FrameLabels, near_u: &[bool], w: usize, fraction: f32) -> Vec<usize> {
     let h = fl.u.len() / w.max(1);
     let min = fraction * w.max(h) as f32;
-    let d = chamfer_distance(&fl.u, w);
+    let d = chamfer_distance(near_u, w);
     (0..fl.u.len())
         .filter(|&i| !fl.u[i] && !fl.l[i] && d[i] >= min)
+        .collect()
+}
+
+/// Pixels that are U in frame `t` or in any frame up to `k` either side.
+fn u_within(labels: &[FrameLabels], t: usize, k: usize) -> Vec<bool> {
+    let near = &labels[t.saturating_sub(k)..(t + k + 1).min(labels.len())];
+    (0..labels[t].u.len())
+        .map(|i| near.iter().any(|m| m.u.get(i).copied().unwrap_or(false)))
         .collect()
 }
 
@@ -922,7 +930,13 @@ fn samples(
         let mut l: Vec<usize> = (0..fl.l.len()).filter(|&i| fl.l[i]).collect();
         let share = o.mlp.unlabelled_share;
         let mut free = if share > 0.0 {
-            far_unlabelled(fl, pr.grid_rgb[t].c[0].w, o.mlp.unlabelled_distance)
+            let near_u = u_within(labels, t, o.mlp.unlabelled_frames);
+            far_unlabelled(
+                fl,
+                &near_u,
+                pr.grid_rgb[t].c[0].w,
+                o.mlp.unlabelled_distance,
+            )
         } else {
             Vec::new()
         };
@@ -1388,10 +1402,10 @@ mod tests {
         for y in 0..h {
             fl.l[y * w + 19] = true;
         }
-        assert_eq!(far_unlabelled(&fl, w, 0.25).len(), w * h - h);
+        assert_eq!(far_unlabelled(&fl, &fl.u, w, 0.25).len(), w * h - h);
         fl.u[5 * w + 3] = true;
         // 0.25 of the longer side (20): 5 px.
-        let far = far_unlabelled(&fl, w, 0.25);
+        let far = far_unlabelled(&fl, &fl.u, w, 0.25);
         let d = chamfer_distance(&fl.u, w);
         assert!(!far.is_empty());
         for (i, di) in d.iter().enumerate() {
@@ -1399,6 +1413,27 @@ mod tests {
             assert_eq!(far.contains(&i), expect, "pixel {i}");
         }
         assert!(!far.contains(&(5 * w + 7)) && far.contains(&(5 * w + 8)));
+    }
+
+    /// U of the frames within k either side counts, and no further: an
+    /// object with U only in frame 1 keeps frame 4's pixels at k = 3, not
+    /// at k = 2.
+    #[test]
+    fn u_of_neighbouring_frames_keeps_static_samples_away() {
+        let (w, h) = (20, 10);
+        let mut labels: Vec<FrameLabels> =
+            (0..6).map(|_| FrameLabels::no_evidence(w * h)).collect();
+        labels[1].u[5 * w + 3] = true;
+        assert!(u_within(&labels, 4, 3)[5 * w + 3]);
+        assert!(u_within(&labels, 4, 2).iter().all(|b| !b));
+        assert_eq!(u_within(&labels, 1, 0), labels[1].u);
+        let far = far_unlabelled(&labels[4], &u_within(&labels, 4, 3), w, 0.25);
+        assert!(!far.contains(&(5 * w + 3)) && !far.contains(&(5 * w + 7)));
+        assert!(far.contains(&(5 * w + 8)));
+        assert_eq!(
+            far_unlabelled(&labels[4], &u_within(&labels, 4, 2), w, 0.25).len(),
+            w * h
+        );
     }
 
     /// A partial `flow` object changes only the fields it names: the rest
