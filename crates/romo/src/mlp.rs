@@ -141,14 +141,15 @@ pub struct MlpOptions {
     /// 0.866 against 0.611 / 0.838 (recall collapses rescued, one seed
     /// lost); demo, rotation, tripod and 3 objects lose 0.002–0.007.
     /// Measured in the frame alone (`unlabelled_frames` 0) blackswan gains
-    /// (0.285 → 0.38) but objects with no U in a frame are drawn as static
-    /// (5 objects seed 2 0.718 → 0.282).
+    /// (seed 0: 0.286 → 0.396) but objects with no U in a frame are drawn
+    /// as static (5 objects seed 2 0.718 → 0.282).
     pub unlabelled_share: f64,
     /// Unlabelled pixels drawn as static lie at least this far from any U
-    /// pixel of their frame or its neighbours, as a fraction of the grid's longer side (ours;
-    /// 0.125: 32 px of the 256 px grid). Nearer, they are often
-    /// the unlabelled rest of an object whose parts are U (a followed
-    /// pedestrian's torso above its legs).
+    /// pixel of their frame or of the frames within
+    /// [`MlpOptions::unlabelled_frames`], as a fraction of the grid's
+    /// longer side (ours; 0.125: 32 px of the 256 px grid). Nearer, they
+    /// are often the unlabelled rest of an object whose parts are U (a
+    /// followed pedestrian's torso above its legs).
     pub unlabelled_distance: f32,
     /// Frames either side whose U also keeps unlabelled pixels from being
     /// drawn as static (ours; default 3): an object without U in one frame
