@@ -23,6 +23,7 @@ use crate::geometry::oriented::{Oriented, VoteOptions, intrinsics};
 use crate::geometry::robust::{
     FitReport, ModelSelection, RobustOptions, TwoView, fit_two_view_all,
 };
+use crate::plane::Plane;
 use nalgebra::Matrix3;
 use rand::{Rng, SeedableRng};
 use rayon::prelude::*;
@@ -133,6 +134,13 @@ pub struct LabelOptions {
     /// to a moving edge it is large. 0 = off.
     #[cfg_attr(feature = "cli", arg(skip))]
     pub u_min_gradient: f32,
+    /// Majority filter on U (ours; see [`u_majority`]): a pixel that is U
+    /// by its residual (`S > u·v`) stays U only when more than half of the
+    /// `(2r + 1)²` grid pixels around it are U, `r` this radius (default
+    /// 4; 0 = off). U from tests that do not raise `S` (three-view) is
+    /// kept as it is.
+    #[cfg_attr(feature = "cli", arg(skip))]
+    pub u_majority_radius: usize,
     /// A frame with fewer than this fraction of textured pixels (gradient
     /// above [`crate::pipeline::TEXTURE_GRADIENT`]) is not used in any pair:
     /// its flow is meaningless (default 0.01).
@@ -194,6 +202,7 @@ impl Default for LabelOptions {
             three_view_l_px: 1.0,
             local_u_floor: 0.0,
             u_min_gradient: 0.02,
+            u_majority_radius: 4,
             min_texture_fraction: 0.01,
             min_valid_fraction: 0.05,
             occlusion: false,
@@ -568,6 +577,34 @@ pub fn frame_labels(sides: &[Side], o: &LabelOptions) -> FrameLabels {
     }
 }
 
+/// The majority filter on U (`LabelOptions::u_majority_radius` `r`): a
+/// pixel that is U because its residual exceeds `u_factor·v` leaves U
+/// unless more than half of the `(2r + 1)²` window around it (clipped at
+/// the frame's edges) is U. A residual near the threshold in a noisy region
+/// (rippling water, a swan's wake) crosses it in scattered pixels, while a
+/// moving object's residual exceeds it over an area. Isolated U costs the
+/// MLP most: trained on U from the pond around blackswan's swan, it paints
+/// the whole pond. U from other tests (the three-view test, which finds
+/// pedestrians walking along the epipolar lines in few pixels) is kept.
+pub fn u_majority(fl: &mut FrameLabels, w: usize, h: usize, radius: usize, u_factor: f32) {
+    if radius == 0 || fl.u.len() != w * h {
+        return;
+    }
+    let density = Plane {
+        w,
+        h,
+        data: fl.u.iter().map(|b| f32::from(u8::from(*b))).collect(),
+    }
+    .box_mean(radius);
+    let thr = u_factor * fl.v;
+    for ((u, d), s) in fl.u.iter_mut().zip(&density.data).zip(&fl.s) {
+        if *u && *s > thr && *d <= 0.5 {
+            *u = false;
+        }
+    }
+    fl.u_coverage = fl.u.iter().filter(|b| **b).count() as f32 / (w * h) as f32;
+}
+
 /// Pixels with less parallax in either pair than this are not tested by
 /// [`three_view_residuals`] (working-grid px).
 pub const THREE_VIEW_MIN_PARALLAX_PX: f64 = 0.5;
@@ -799,6 +836,77 @@ pub fn propagate_u(
 mod tests {
     use super::*;
     use crate::plane::Plane;
+
+    #[test]
+    fn u_majority_keeps_areas_and_drops_scattered_pixels() {
+        // A 12 × 12 square of U with a residual of 3·v, and single U
+        // pixels (residual 2·v) every 6 px elsewhere: at r = 4 a square's
+        // pixel stays U when more than half of its 9 × 9 window is in the
+        // square (its middle and the middles of its sides; not its corners,
+        // 25 of 81), and every single pixel leaves. A single U pixel whose
+        // residual is below u·v (U from the three-view test) stays.
+        let (w, h) = (40, 30);
+        let in_square = |x: usize, y: usize| (4..16).contains(&x) && (4..16).contains(&y);
+        let mut s = vec![0.05f32; w * h];
+        let mut u = vec![false; w * h];
+        for y in 0..h {
+            for x in 0..w {
+                let i = y * w + x;
+                if in_square(x, y) {
+                    s[i] = 3.0;
+                    u[i] = true;
+                } else if x >= 20 && x % 6 == 0 && y % 6 == 0 {
+                    s[i] = 2.0;
+                    u[i] = true;
+                }
+            }
+        }
+        let three_view = 25 * w + 10;
+        u[three_view] = true;
+        let mut fl = FrameLabels {
+            s,
+            u,
+            l: vec![false; w * h],
+            v: 1.0,
+            inlier_ratio: 1.0,
+            u_coverage: 0.0,
+            l_coverage: 0.0,
+            valid_ratio: 1.0,
+        };
+        u_majority(&mut fl, w, h, 4, 1.0);
+        assert!(fl.u[three_view]);
+        for y in 0..h {
+            for x in 0..w {
+                let i = y * w + x;
+                if i == three_view {
+                    continue;
+                }
+                let (xs, ys) = (
+                    x.saturating_sub(4)..(x + 5).min(w),
+                    y.saturating_sub(4)..(y + 5).min(h),
+                );
+                let window = xs.len() * ys.len();
+                let inside = ys
+                    .flat_map(|yy| xs.clone().map(move |xx| (xx, yy)))
+                    .filter(|(xx, yy)| in_square(*xx, *yy))
+                    .count();
+                let expect = in_square(x, y) && 2 * inside > window;
+                assert_eq!(fl.u[i], expect, "pixel ({x}, {y})");
+            }
+        }
+        for (x, y) in [(9, 9), (10, 4), (4, 10), (15, 9), (9, 15)] {
+            assert!(fl.u[y * w + x], "({x}, {y}) should stay U");
+        }
+        for (x, y) in [(4, 4), (15, 15), (24, 6), (36, 24)] {
+            assert!(!fl.u[y * w + x], "({x}, {y}) should leave U");
+        }
+        let n = fl.u.iter().filter(|b| **b).count();
+        assert!((fl.u_coverage - n as f32 / (w * h) as f32).abs() < 1e-6);
+        // r = 0 leaves U as it is.
+        let before = fl.u.clone();
+        u_majority(&mut fl, w, h, 0, 1.0);
+        assert_eq!(fl.u, before);
+    }
 
     #[test]
     fn u_propagates_along_the_flow_and_clears_l() {

@@ -13,7 +13,7 @@ use crate::geometry::robust::{FitReport, ModelSelection};
 use crate::labels::{
     FrameLabels, LabelOptions, NoFit, PairResult, Side, apply_three_view, cycle_valid,
     drop_unreliable_fits, fit_pair, frame_labels, occlusion_violations, propagate_u,
-    three_view_residuals,
+    three_view_residuals, u_majority,
 };
 use crate::mlp::{Label, Mlp, MlpOptions, TrainReport, train, train_restarts};
 use crate::objects::{Evidence, ObjectMethod, graph_cut};
@@ -795,6 +795,13 @@ fn label_round(
                 }
                 fl.u_coverage = fl.u.iter().filter(|b| **b).count() as f32 / fl.u.len() as f32;
             }
+            u_majority(
+                &mut fl,
+                gw,
+                gh,
+                o.labels.u_majority_radius,
+                o.labels.u_factor,
+            );
             fl
         })
         .collect();
