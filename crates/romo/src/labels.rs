@@ -486,6 +486,13 @@ pub struct FrameLabels {
 }
 
 impl FrameLabels {
+    /// Count `u_coverage` and `l_coverage` again after U or L changed.
+    pub fn recount_coverage(&mut self) {
+        let m = self.u.len().max(1) as f32;
+        self.u_coverage = self.u.iter().filter(|b| **b).count() as f32 / m;
+        self.l_coverage = self.l.iter().filter(|b| **b).count() as f32 / m;
+    }
+
     /// Labels of a frame with no usable pair on either side: no residuals,
     /// nothing in U or L.
     pub fn no_evidence(n: usize) -> Self {
@@ -590,13 +597,13 @@ pub fn frame_labels(sides: &[Side], o: &LabelOptions) -> FrameLabels {
 /// MLP most: trained on U from the pond around blackswan's swan, it paints
 /// the whole pond. U from other tests (the three-view test, which finds
 /// pedestrians walking along the epipolar lines in few pixels) is kept.
-pub fn u_majority(fl: &mut FrameLabels, w: usize, h: usize, radius: usize, u_factor: f32) {
-    if radius == 0 || fl.u.len() != w * h {
+pub fn u_majority(fl: &mut FrameLabels, w: usize, radius: usize, u_factor: f32) {
+    if radius == 0 || w == 0 || !fl.u.len().is_multiple_of(w) {
         return;
     }
     let density = Plane {
         w,
-        h,
+        h: fl.u.len() / w,
         data: fl.u.iter().map(|b| f32::from(u8::from(*b))).collect(),
     }
     .box_mean(radius);
@@ -606,7 +613,7 @@ pub fn u_majority(fl: &mut FrameLabels, w: usize, h: usize, radius: usize, u_fac
             *u = false;
         }
     }
-    fl.u_coverage = fl.u.iter().filter(|b| **b).count() as f32 / (w * h) as f32;
+    fl.recount_coverage();
 }
 
 /// Pixels with less parallax in either pair than this are not tested by
@@ -778,9 +785,7 @@ pub fn apply_three_view(fl: &mut FrameLabels, residual: &[f32], o: &LabelOptions
             fl.l[i] = false;
         }
     }
-    let m = fl.u.len().max(1) as f32;
-    fl.u_coverage = fl.u.iter().filter(|b| **b).count() as f32 / m;
-    fl.l_coverage = fl.l.iter().filter(|b| **b).count() as f32 / m;
+    fl.recount_coverage();
 }
 
 /// Spread U along the flow `passes` times (see
@@ -830,9 +835,7 @@ pub fn propagate_u(
         });
     }
     for fl in labels.iter_mut() {
-        let m = fl.u.len().max(1) as f32;
-        fl.u_coverage = fl.u.iter().filter(|b| **b).count() as f32 / m;
-        fl.l_coverage = fl.l.iter().filter(|b| **b).count() as f32 / m;
+        fl.recount_coverage();
     }
 }
 
@@ -877,7 +880,7 @@ mod tests {
             l_coverage: 0.0,
             valid_ratio: 1.0,
         };
-        u_majority(&mut fl, w, h, 4, 1.0);
+        u_majority(&mut fl, w, 4, 1.0);
         assert!(fl.u[three_view]);
         for y in 0..h {
             for x in 0..w {
@@ -908,7 +911,7 @@ mod tests {
         assert!((fl.u_coverage - n as f32 / (w * h) as f32).abs() < 1e-6);
         // r = 0 leaves U as it is.
         let before = fl.u.clone();
-        u_majority(&mut fl, w, h, 0, 1.0);
+        u_majority(&mut fl, w, 0, 1.0);
         assert_eq!(fl.u, before);
     }
 

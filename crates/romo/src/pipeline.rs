@@ -793,15 +793,9 @@ fn label_round(
                 for (u, t) in fl.u.iter_mut().zip(&pr.textured[t]) {
                     *u &= *t;
                 }
-                fl.u_coverage = fl.u.iter().filter(|b| **b).count() as f32 / fl.u.len() as f32;
+                fl.recount_coverage();
             }
-            u_majority(
-                &mut fl,
-                gw,
-                gh,
-                o.labels.u_majority_radius,
-                o.labels.u_factor,
-            );
+            u_majority(&mut fl, gw, o.labels.u_majority_radius, o.labels.u_factor);
             fl
         })
         .collect();
@@ -862,9 +856,7 @@ fn apply_occlusion(
             fl.l[i] = false;
         }
     }
-    let m = fl.u.len().max(1) as f32;
-    fl.u_coverage = fl.u.iter().filter(|b| **b).count() as f32 / m;
-    fl.l_coverage = fl.l.iter().filter(|b| **b).count() as f32 / m;
+    fl.recount_coverage();
 }
 
 /// A frame's unlabelled pixels (neither U nor L) at least `fraction` of
