@@ -4,6 +4,7 @@
 mod cmd;
 mod ctx;
 mod keyframes;
+mod memory;
 mod pipeline;
 mod plan;
 mod preflight;
@@ -32,6 +33,8 @@ struct Cli {
 fn main() {
     #[cfg(target_os = "linux")]
     ensure_runtime_dir();
+    // Without glibc there is nothing to tune; the defaults stay.
+    let _ = memory::keep_freed_memory();
     let cli = Cli::parse();
     let ctx = Ctx {
         json: cli.json,

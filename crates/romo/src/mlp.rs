@@ -494,8 +494,15 @@ multiversion! {
         let (mut loss, mut g) = (0.0f64, vec![0.0f64; ne]);
         let o2 = HIDDEN * c + HIDDEN;
         let mut xf = vec![0.0f64; c];
+        // The chunk's rows gathered first: a mini-batch's rows are spread
+        // over the whole sample matrix, and a plain copy keeps many of
+        // their cache misses in flight where the network's arithmetic
+        // would wait on each in turn.
+        let mut xs = Vec::with_capacity(rows.len() * c);
         for &i in rows {
-            let xi = &x[i * c..(i + 1) * c];
+            xs.extend_from_slice(&x[i * c..(i + 1) * c]);
+        }
+        for (&i, xi) in rows.iter().zip(xs.chunks_exact(c.max(1))) {
             let (a1, z2) = forward(net, xi);
             let h = sigmoid(z2);
             let dh = match labels[i] {

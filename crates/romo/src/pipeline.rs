@@ -148,10 +148,11 @@ pub struct RomoOptions {
     #[cfg_attr(feature = "cli", arg(long, required = false))]
     pub seed: u64,
     /// Longest run of frames segmented at once (default 500; 0: the whole
-    /// video). The stage holds about 11 MB per frame (flows, features,
-    /// the space–time cut), so a longer video is cut into runs of at most
-    /// this many frames, each sharing one frame with the next, each with
-    /// its own MLP (`romo::scene::chunks`): 500 frames need about 6 GB. The
+    /// video). The stage holds 10–13 MB per 854×480 frame (flows,
+    /// features, the space–time cut), so a longer video is cut into runs of
+    /// at most this many frames, each sharing one frame with the next, each
+    /// with its own MLP (`romo::scene::chunks`): 500 frames peak at about
+    /// 5 GB, 650 at once at 8.4 GB. The
     /// shared frame keeps the earlier window's mask, made from its backward
     /// pair only; the progress line names the window it counts.
     #[cfg_attr(feature = "cli", arg(long, required = false))]
