@@ -6,8 +6,8 @@
 //! blocks are freed) with fresh `mmap`s, and returns the free top of its
 //! heaps to the kernel once it exceeds the trim threshold (twice the mmap
 //! threshold). Every new plane then costs page faults and the kernel's
-//! zeroing of its pages: about a tenth of the mask stage's time on the
-//! 2-core machine (`perf`: `exc_page_fault`, `clear_page_erms`, `memset`).
+//! zeroing of its pages: 5–6% of the mask stage's `perf` samples on the
+//! 2-core machine (`exc_page_fault`, `clear_page_erms`, `memset`).
 //! [`keep_freed_memory`] keeps freed memory for reuse instead; the run's
 //! stages release it between them ([`release_freed_memory`]), so a stage's
 //! freed memory does not stay resident through the next.
