@@ -367,8 +367,8 @@ fn colour_bins(e: &Evidence) -> Vec<Vec<u16>> {
 /// log ratio of a foreground and a background colour histogram, ÷ 2,
 /// clamped to ±1. A pixel is a foreground seed when `fg_side(frame,
 /// pixel)` (first U, or positive evidence and not L; in the re-estimation,
-/// the cut's moving pixels), a background seed otherwise. With `colour_tile` > 0 each pixel's
-/// histograms count the seeds of its tile and the 8 around it in the
+/// the cut's moving pixels), a background seed otherwise. With
+/// `colour_tile` > 0 each pixel's histograms count the seeds of its tile and the 8 around it in the
 /// frames within `colour_frames` of its own, plus the video's histograms
 /// scaled to [`COLOUR_PRIOR`] samples: an object whose colour also occurs
 /// elsewhere in the video (a tan animal before a tan wall) is still told

@@ -152,9 +152,9 @@ pub struct RomoOptions {
     /// features, the space–time cut), so a longer video is cut into runs of
     /// at most this many frames, each sharing one frame with the next, each
     /// with its own MLP (`romo::scene::chunks`): 500 frames peak at about
-    /// 5 GB, 650 at once at 8.4 GB. The
-    /// shared frame keeps the earlier window's mask, made from its backward
-    /// pair only; the progress line names the window it counts.
+    /// 5 GB, 650 at once at 8.4 GB. The shared frame keeps the earlier
+    /// window's mask, made from its backward pair only; the progress line
+    /// names the window it counts.
     #[cfg_attr(feature = "cli", arg(long, required = false))]
     pub chunk_frames: usize,
     /// Order of a folder's frames (`romo::order`): `auto` (default)

@@ -125,6 +125,9 @@ fn segment_with_copy(
         };
         Ok((report, copy))
     })();
+    // The stage's planes are freed; the next stage (pose, training) need not
+    // keep them resident.
+    crate::memory::release_freed_memory();
     let (report, copy) = staged.map_err(|e| anyhow::anyhow!(stage.public(&format!("{e:#}"))))?;
     stage.commit()?;
     let mut report = report;

@@ -324,6 +324,7 @@ fn prepare_variants(scene: &Scene, out: &Path, ctx: &Ctx) -> Result<(Vec<Variant
         pb.set_position(done as u64);
     })?;
     pb.finish_and_clear();
+    crate::memory::release_freed_memory();
     let mut masks = MaskStage {
         frames: romo_rep.frames.len(),
         minutes: t_mask.elapsed().as_secs_f64() / 60.0,

@@ -915,7 +915,6 @@ fn run_stages(plan: &Plan, results: &mut Results, ctx: &Ctx) -> Result<Vec<Stage
         pipeline::remove_manifest(&plan.out, stage)?;
         // The report lists this stage's time, so record it before the report runs.
         let value = (def.run)(plan, results, ctx)?;
-        crate::memory::release_freed_memory();
         let seconds = t0.elapsed().as_secs_f64();
         if stage != Stage::Report {
             results.timings.push((stage.name().into(), seconds));
