@@ -141,7 +141,9 @@ fn run() -> Res<()> {
                     &gt_grid,
                 );
             }
-            let frame = Rgb::from_image(&loader::io::read_rgb32f(p)?);
+            let frame = seg
+                .exposure
+                .applied(Rgb::from_image(&loader::io::read_rgb32f(p)?));
             if let Ok(d) = std::env::var("RAW") {
                 raw(&d, &s, i, &seg, &gt_grid, &frame.resize(gw, gh))?;
             }

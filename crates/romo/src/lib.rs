@@ -10,6 +10,7 @@
 #[cfg(feature = "cli")]
 pub mod cli;
 pub mod error;
+pub mod exposure;
 pub mod features;
 pub mod flow;
 pub mod geometry;

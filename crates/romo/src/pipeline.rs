@@ -6,6 +6,7 @@
 //! long side is `grid_max_side` (≈ ¼ of a DAVIS frame); flow is computed on
 //! frames at `flow_scale` × that grid and resampled to it.
 
+use crate::exposure::Exposure;
 use crate::features::{FeatureExtractor, FeatureMap, standardise};
 use crate::flow::dis::DisOptions;
 use crate::flow::{Flow, FlowEstimator};
@@ -379,6 +380,9 @@ pub struct Segmentation {
     pub residual: Vec<Vec<f32>>,
     /// Last round's mean flow magnitude `v` per frame (grid px).
     pub mean_flow: Vec<f32>,
+    /// The exposure map the stages saw the frames through; the full-size
+    /// frames that guide the masks' upsampling take it too.
+    pub exposure: Exposure,
     /// Diagnostics.
     pub report: RomoReport,
     /// With `RomoOptions::record_stages`: the grid probabilities after each
@@ -400,6 +404,8 @@ impl Timer<'_> {
 
 /// Everything computed once per video.
 struct Prepared {
+    /// The video's exposure map, applied to every frame the stages see.
+    exposure: Exposure,
     fwd: Vec<Flow>,
     bwd: Vec<Flow>,
     valid_f: Vec<Vec<bool>>,
@@ -435,6 +441,11 @@ pub const TEXTURE_GRADIENT: f32 = 2.0 / 255.0;
 /// Fraction of a grey frame's pixels whose gradient exceeds
 /// [`TEXTURE_GRADIENT`].
 pub fn texture_fraction(g: &Plane) -> f32 {
+    texture_fraction_above(g, TEXTURE_GRADIENT)
+}
+
+/// Fraction of a grey frame's pixels whose gradient exceeds `thr`.
+pub fn texture_fraction_above(g: &Plane, thr: f32) -> f32 {
     let (w, h) = (g.w, g.h);
     if w < 3 || h < 3 {
         return 0.0;
@@ -447,7 +458,7 @@ pub fn texture_fraction(g: &Plane) -> f32 {
         for x in 1..w - 1 {
             let gx = 0.5 * (row[x + 1] - row[x - 1]);
             let gy = 0.5 * (dn[x] - up[x]);
-            if gx.abs().max(gy.abs()) > TEXTURE_GRADIENT {
+            if gx.abs().max(gy.abs()) > thr {
                 n += 1;
             }
         }
@@ -484,6 +495,7 @@ fn load_frames(src: &dyn FrameSource, first: &Rgb, (fw, fh): (usize, usize)) -> 
 fn pair_flows(
     src: &dyn FrameSource,
     small: &[Rgb],
+    exposure: Exposure,
     flow: &dyn FlowEstimator,
     full: (usize, usize),
     (gw, gh): (usize, usize),
@@ -494,7 +506,7 @@ fn pair_flows(
         if (sw, sh) == fsize {
             return Ok(std::borrow::Cow::Borrowed(&small[i]));
         }
-        let f = src.frame(i)?;
+        let f = exposure.applied(src.frame(i)?);
         Ok(std::borrow::Cow::Owned(if (f.w(), f.h()) == (sw, sh) {
             f
         } else {
@@ -592,14 +604,40 @@ fn prepare(
     let grid_focal = ratio * gw as f64;
     let (fw, fh) = (gw * o.flow_scale, gh * o.flow_scale);
     progress("load", 0, n);
-    let small = t.time("load", || load_frames(src, &first, (fw, fh)))?;
+    let mut small = t.time("load", || load_frames(src, &first, (fw, fh)))?;
+    let exposure = t.time("load", || {
+        let e = Exposure::measure(&small);
+        small.par_iter_mut().for_each(|f| e.apply(f));
+        e
+    });
+    if exposure.stretches() {
+        report.warnings.push(format!(
+            "the frames are dark or flat (99% of their values within [{:.3}, {:.3}]): stretched ×{:.1} for segmentation",
+            exposure.lo,
+            exposure.hi,
+            exposure.gain()
+        ));
+    }
     progress("flow", 0, n - 1);
     let grays: Vec<Plane> = small.iter().map(|f| f.gray()).collect();
     let (fwd, bwd) = t.time("flow", || {
-        pair_flows(src, &small, flow, (first.w(), first.h()), (gw, gh))
+        pair_flows(
+            src,
+            &small,
+            exposure,
+            flow,
+            (first.w(), first.h()),
+            (gw, gh),
+        )
     })?;
     progress("flow", n - 1, n - 1);
-    let texture: Vec<f32> = grays.par_iter().map(texture_fraction).collect();
+    // Whether a frame has texture at all is judged in the source's grey
+    // levels: stretching does not make a black frame textured.
+    let texture_thr = TEXTURE_GRADIENT * exposure.gain();
+    let texture: Vec<f32> = grays
+        .par_iter()
+        .map(|g| texture_fraction_above(g, texture_thr))
+        .collect();
     let (mut valid_f, mut valid_b): (Vec<Vec<bool>>, Vec<Vec<bool>>) = t.time("cycle", || {
         (0..n - 1)
             .into_par_iter()
@@ -650,6 +688,7 @@ fn prepare(
     let feats = maps.iter().map(|m| m.pixel_major()).collect();
     report.timings_ms.extend(timings);
     Ok(Prepared {
+        exposure,
         fwd,
         bwd,
         valid_f,
@@ -1036,6 +1075,7 @@ pub fn segment_frames(
         l: labels.iter().map(|l| l.l.clone()).collect(),
         residual: labels.iter().map(|l| l.s.clone()).collect(),
         mean_flow: labels.iter().map(|l| l.v).collect(),
+        exposure: pr.exposure,
         report,
         stages,
     })

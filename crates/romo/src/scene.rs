@@ -4,6 +4,7 @@
 //! 0 moving; COLMAP's convention), optional `motion/<name>.png` overlays and
 //! `probabilities/<stem>.exr`.
 
+use crate::exposure::Exposure;
 use crate::features::{FeatureExtractor, HandFeatures};
 use crate::flow::FlowEstimator;
 use crate::flow::dis::Dis;
@@ -422,6 +423,7 @@ fn segment_sequence(
         write_outputs(
             &sub,
             &seg.probs,
+            seg.exposure,
             first,
             &names[start..end],
             sizes.map(|s| &s[start..end]),
@@ -566,11 +568,13 @@ fn merge_window(mut whole: RomoReport, part: RomoReport, start: usize, shared: b
 }
 
 /// Masks (and overlays, probabilities) of `src`'s frames `first ..` from
-/// their grid probabilities.
+/// their grid probabilities; the frames (guide and overlay) through
+/// `exposure`.
 #[allow(clippy::too_many_arguments)]
 fn write_outputs(
     src: &dyn FrameSource,
     probs: &[Plane],
+    exposure: Exposure,
     first: usize,
     names: &[String],
     sizes: Option<&[(usize, usize)]>,
@@ -583,7 +587,9 @@ fn write_outputs(
     (first..names.len())
         .into_par_iter()
         .try_for_each(|i| -> Result<()> {
-            let frame = src.frame(i)?;
+            // The guide as the stages saw it: the guided filter's ε is in
+            // absolute grey levels.
+            let frame = exposure.applied(src.frame(i)?);
             let prob = upsample_probability(&probs[i], &frame, &opts.refine);
             let sized = match sizes.and_then(|s| s.get(i)) {
                 Some(&(w, h)) if (w, h) != (prob.w, prob.h) => {

@@ -2,7 +2,8 @@
 //! correspondences carry no evidence of motion. They are kept whole (moving
 //! probability 0) with a warning naming them, the pairs they spoil are
 //! skipped, their neighbours are labelled from their other side, and the
-//! stage never stops.
+//! stage never stops. An underexposed video is segmented as the
+//! well-exposed one is.
 #![allow(clippy::unwrap_used, clippy::expect_used)]
 
 use romo::plane::Rgb;
@@ -100,6 +101,98 @@ fn black_frames_are_kept_whole_with_a_warning() {
     }
     assert_eq!(r.frames[3].model_fwd, "");
     assert_ne!(r.frames[2].model_fwd, "");
+}
+
+/// A random-dot texture of 2×2 px cells (seeded hash), values in
+/// [0.2, 0.9]: sharp, as a photo's detail is.
+fn dots(x: i64, y: i64, seed: u64) -> f32 {
+    let mut h = (x.div_euclid(2) as u64).wrapping_mul(0x9e37_79b9_7f4a_7c15)
+        ^ (y.div_euclid(2) as u64).wrapping_mul(0xc2b2_ae3d_27d4_eb4f)
+        ^ seed;
+    h ^= h >> 31;
+    h = h.wrapping_mul(0xbf58_476d_1ce4_e5b9);
+    h ^= h >> 29;
+    0.2 + 0.7 * (h >> 40) as f32 / (1u64 << 24) as f32
+}
+
+/// Frame t of the camera panning over [`dots`] (the world shifts by
+/// (2t, t) px) with a 30×30 square of other dots at (100 − 4t, 40 + 4t):
+/// it moves by (−2, 5) px a frame against the background.
+fn dot_frame(t: usize) -> Rgb {
+    let t = t as i64;
+    let mut data = Vec::with_capacity(W * H * 3);
+    for y in 0..H as i64 {
+        for x in 0..W as i64 {
+            let (sx, sy) = (100 - 4 * t, 40 + 4 * t);
+            let v = if (sx..sx + 30).contains(&x) && (sy..sy + 30).contains(&y) {
+                dots(x - sx, y - sy, 7)
+            } else {
+                dots(x + 2 * t, y + t, 1)
+            };
+            data.extend_from_slice(&[v, 0.8 * v + 0.1, 1.0 - 0.6 * v]);
+        }
+    }
+    Rgb::from_interleaved(W, H, &data)
+}
+
+/// Mean J over frames 1–8 of [`dot_frame`]'s square on the grid
+/// (probabilities > 0.5).
+fn square_j(seg: &romo::pipeline::Segmentation) -> f64 {
+    let (gw, gh) = seg.report.grid;
+    let (kx, ky) = (W as f32 / gw as f32, H as f32 / gh as f32);
+    let js: Vec<f64> = (1..9)
+        .map(|t| {
+            let (sx, sy) = (100.0 - 4.0 * t as f32, 40.0 + 4.0 * t as f32);
+            let (mut inter, mut union) = (0usize, 0usize);
+            for (i, p) in seg.probs[t].data.iter().enumerate() {
+                let (x, y) = (((i % gw) as f32 + 0.5) * kx, ((i / gw) as f32 + 0.5) * ky);
+                let g = x >= sx && x < sx + 30.0 && y >= sy && y < sy + 30.0;
+                let m = *p > 0.5;
+                inter += usize::from(m && g);
+                union += usize::from(m || g);
+            }
+            inter as f64 / union.max(1) as f64
+        })
+        .collect();
+    js.iter().sum::<f64>() / js.len() as f64
+}
+
+/// The video at a tenth of its brightness, in 8 bits (values 2–23 of 255):
+/// every gradient is ten times smaller, so no pixel passed the texture
+/// thresholds and nothing was found moving. The exposure map stretches it
+/// back (with a warning), and the square is found as in the original.
+#[test]
+fn an_underexposed_video_is_segmented_like_the_original() {
+    let dark = |f: Rgb| Rgb {
+        c: f.c.map(|mut c| {
+            c.data
+                .iter_mut()
+                .for_each(|v| *v = (*v * 0.1 * 255.0).round() / 255.0);
+            c
+        }),
+    };
+    let normal: Vec<Rgb> = (0..10).map(dot_frame).collect();
+    let darkened: Vec<Rgb> = normal.iter().cloned().map(dark).collect();
+    let (a, b) = (run(normal), run(darkened));
+    assert!(
+        b.exposure.gain() > 5.0 * a.exposure.gain(),
+        "{:?} {:?}",
+        a.exposure,
+        b.exposure
+    );
+    assert!(
+        b.report.warnings.iter().any(|w| w.contains("dark or flat")),
+        "{:?}",
+        b.report.warnings
+    );
+    assert!(
+        b.report.no_evidence_frames.is_empty(),
+        "{:?}",
+        b.report.warnings
+    );
+    let (ja, jb) = (square_j(&a), square_j(&b));
+    assert!(ja > 0.7, "well exposed: J {ja}");
+    assert!(jb > ja - 0.1, "underexposed: J {jb} against {ja}");
 }
 
 #[test]
