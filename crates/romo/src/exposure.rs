@@ -37,7 +37,8 @@ use rayon::prelude::*;
 pub const MIN_RANGE: f32 = 1.0 / 16.0;
 
 /// A video whose values (between the percentiles below) span less than
-/// this is stretched; others are left as they are.
+/// this is stretched; others are left as they are (stretching those gained
+/// nothing, module doc).
 pub const STRETCH_BELOW: f32 = 0.5;
 
 /// Percentiles of the values that map to 0 and 1.
@@ -51,9 +52,11 @@ const BINS: usize = 1024;
 /// One linear exposure map for a video.
 #[derive(Debug, Clone, Copy, PartialEq)]
 pub struct Exposure {
-    /// Value mapped to 0.
+    /// The values' 0.5th percentile: mapped to 0 when the video is
+    /// stretched.
     pub lo: f32,
-    /// Value mapped to 1 (when `hi − lo ≥ MIN_RANGE`).
+    /// The values' 99.5th percentile: mapped to 1 when the video is
+    /// stretched and `hi − lo ≥ MIN_RANGE`.
     pub hi: f32,
 }
 
