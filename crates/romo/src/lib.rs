@@ -7,6 +7,7 @@
 //! robust epipolar [`geometry`] → Sampson-based U/L labels → per-pixel
 //! features → a tiny MLP → refinement to full resolution → masks.
 
+pub mod borders;
 #[cfg(feature = "cli")]
 pub mod cli;
 pub mod error;

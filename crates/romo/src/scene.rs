@@ -395,6 +395,19 @@ fn segment_sequence(
     let sizes: Option<Vec<(usize, usize)>> =
         sizes.map(|s| ordering.order.iter().map(|&i| s[i]).collect());
     let sizes = sizes.as_deref();
+    // Bars at the edges (pillarbox, letterbox) are left out of the
+    // segmentation and masked ([`crate::borders`]).
+    let borders = {
+        let n = src.len();
+        let k = n.min(8);
+        let sample = (0..k)
+            .map(|j| src.frame(j * n.saturating_sub(1) / k.saturating_sub(1).max(1)))
+            .collect::<Result<Vec<_>>>()?;
+        crate::borders::detect(&sample)
+    };
+    let cropped = Cropped { src, borders };
+    let full = src;
+    let src: &dyn FrameSource = if borders.is_empty() { full } else { &cropped };
     let fx = make_extractor(opts)?;
     let flow = make_flow(opts)?;
     let masks_dir = out.join("masks");
@@ -404,6 +417,11 @@ fn segment_sequence(
     for (k, (start, end)) in windows.into_iter().enumerate() {
         let sub = Window {
             src,
+            start,
+            len: end - start,
+        };
+        let sub_full = Window {
+            src: full,
             start,
             len: end - start,
         };
@@ -421,7 +439,7 @@ fn segment_sequence(
         let first = usize::from(k > 0);
         let t = Instant::now();
         write_outputs(
-            &sub,
+            (&sub, &sub_full, borders),
             &seg.probs,
             seg.exposure,
             first,
@@ -444,6 +462,15 @@ fn segment_sequence(
         f.name = n.clone();
     }
     report.masks_dir = Some(masks_dir);
+    if !borders.is_empty() {
+        report.warnings.insert(
+            0,
+            format!(
+                "bars at the frame's edges (left {}, right {}, top {}, bottom {} px) are not part of the scene: segmented without them and masked",
+                borders.left, borders.right, borders.top, borders.bottom
+            ),
+        );
+    }
     report.timings_ms.insert("order".into(), order_ms);
     report.name_order_ratio = ordering.ratio.is_finite().then_some(ordering.ratio);
     report.reordered = ordering.reordered;
@@ -459,6 +486,29 @@ fn segment_sequence(
         );
     }
     Ok(report)
+}
+
+/// `src`'s frames cropped to what lies between their bars.
+struct Cropped<'a> {
+    src: &'a dyn FrameSource,
+    borders: crate::borders::Borders,
+}
+
+impl FrameSource for Cropped<'_> {
+    fn len(&self) -> usize {
+        self.src.len()
+    }
+    fn frame(&self, i: usize) -> Result<Rgb> {
+        Ok(crate::borders::crop(&self.src.frame(i)?, &self.borders))
+    }
+    fn size(&self, i: usize) -> Result<(usize, usize)> {
+        let (w, h) = self.src.size(i)?;
+        let (_, _, cw, ch) = self.borders.content(w, h);
+        Ok((cw, ch))
+    }
+    fn describe(&self, i: usize) -> String {
+        self.src.describe(i)
+    }
 }
 
 /// Frames `start .. start + len` of `src`.
@@ -569,10 +619,11 @@ fn merge_window(mut whole: RomoReport, part: RomoReport, start: usize, shared: b
 
 /// Masks (and overlays, probabilities) of `src`'s frames `first ..` from
 /// their grid probabilities; the frames (guide and overlay) through
-/// `exposure`.
+/// `exposure`. `src` is what was segmented: `full`'s frames between their
+/// `borders`, whose bars are masked.
 #[allow(clippy::too_many_arguments)]
 fn write_outputs(
-    src: &dyn FrameSource,
+    (src, full, borders): (&dyn FrameSource, &dyn FrameSource, crate::borders::Borders),
     probs: &[Plane],
     exposure: Exposure,
     first: usize,
@@ -589,8 +640,12 @@ fn write_outputs(
         .try_for_each(|i| -> Result<()> {
             // The guide as the stages saw it: the guided filter's ε is in
             // absolute grey levels.
-            let frame = exposure.applied(src.frame(i)?);
-            let prob = upsample_probability(&probs[i], &frame, &opts.refine);
+            let mut frame = exposure.applied(src.frame(i)?);
+            let mut prob = upsample_probability(&probs[i], &frame, &opts.refine);
+            if !borders.is_empty() {
+                frame = exposure.applied(full.frame(i)?);
+                prob = crate::borders::paste(&prob, &borders, (frame.w(), frame.h()), 1.0);
+            }
             let sized = match sizes.and_then(|s| s.get(i)) {
                 Some(&(w, h)) if (w, h) != (prob.w, prob.h) => {
                     std::borrow::Cow::Owned(prob.resize(w, h))

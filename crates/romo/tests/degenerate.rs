@@ -195,6 +195,76 @@ fn an_underexposed_video_is_segmented_like_the_original() {
     assert!(jb > ja - 0.1, "underexposed: J {jb} against {ja}");
 }
 
+/// [`dot_frame`] between black bars 20 px wide (pillarboxed) is segmented
+/// as its content cropped is, mask for mask, and the bars are masked.
+#[test]
+fn a_pillarboxed_video_is_segmented_as_its_content() {
+    const BAR: usize = 20;
+    let dir = tempfile::tempdir().unwrap();
+    let (mut padded, mut cropped, mut names) = (vec![], vec![], vec![]);
+    for t in 0..10 {
+        let f = dot_frame(t);
+        let px = |x: usize, y: usize| {
+            image::Rgb([0, 1, 2].map(|k| (f.c[k].at(x, y) * 255.0).round() as u8))
+        };
+        let name = format!("{t:02}.png");
+        let p = dir.path().join(format!("padded_{name}"));
+        image::RgbImage::from_fn(W as u32, H as u32, |x, y| {
+            let x = x as usize;
+            if (BAR..W - BAR).contains(&x) {
+                px(x, y as usize)
+            } else {
+                image::Rgb([0, 0, 0])
+            }
+        })
+        .save(&p)
+        .unwrap();
+        padded.push(p);
+        let c = dir.path().join(format!("cropped_{name}"));
+        image::RgbImage::from_fn((W - 2 * BAR) as u32, H as u32, |x, y| {
+            px(x as usize + BAR, y as usize)
+        })
+        .save(&c)
+        .unwrap();
+        cropped.push(c);
+        names.push(name);
+    }
+    let mut o = romo::RomoOptions::default();
+    o.labels.robust.iterations = 200;
+    let (a, b) = (dir.path().join("a"), dir.path().join("b"));
+    let r = romo::segment_paths(&padded, &names, &a, &o, &|_, _, _| {}).unwrap();
+    assert!(
+        r.warnings[0].contains("left 20, right 20, top 0, bottom 0 px"),
+        "{:?}",
+        r.warnings
+    );
+    romo::segment_paths(&cropped, &names, &b, &o, &|_, _, _| {}).unwrap();
+    let mut moving = 0;
+    for n in &names {
+        let read = |d: &std::path::Path| {
+            image::open(d.join(format!("masks/{n}.png")))
+                .unwrap()
+                .to_luma8()
+        };
+        let (ma, mb) = (read(&a), read(&b));
+        assert_eq!(ma.dimensions(), (W as u32, H as u32));
+        for (x, y, p) in ma.enumerate_pixels() {
+            let x = x as usize;
+            if (BAR..W - BAR).contains(&x) {
+                assert_eq!(
+                    p.0[0],
+                    mb.get_pixel((x - BAR) as u32, y).0[0],
+                    "{n} ({x}, {y})"
+                );
+                moving += usize::from(p.0[0] == 0);
+            } else {
+                assert_eq!(p.0[0], 0, "{n}: bar pixel ({x}, {y}) kept");
+            }
+        }
+    }
+    assert!(moving > 2000, "the square is found: {moving} px");
+}
+
 #[test]
 fn an_all_black_video_is_kept_whole() {
     let frames = vec![black(); 4];
