@@ -57,18 +57,6 @@ impl Borders {
             h.saturating_sub(self.top + self.bottom),
         )
     }
-
-    /// The borders of a frame of `w × h` when these were found at
-    /// `fw × fh` (rounded down: a bar never covers content).
-    pub fn scaled(&self, (fw, fh): (usize, usize), (w, h): (usize, usize)) -> Borders {
-        let s = |v: usize, from: usize, to: usize| (v * to) / from.max(1);
-        Borders {
-            left: s(self.left, fw, w),
-            right: s(self.right, fw, w),
-            top: s(self.top, fh, h),
-            bottom: s(self.bottom, fh, h),
-        }
-    }
 }
 
 /// Mean and spread (max − min over all channels) of column `x` of `f`,
@@ -210,15 +198,6 @@ mod tests {
         assert_eq!(p.at(5, 30), 1.0);
         assert_eq!(p.at(50, 2), 1.0);
         assert_eq!(p.at(50, 30), frames[1].c[0].at(50, 30));
-        assert_eq!(
-            b.scaled((100, 60), (200, 120)),
-            Borders {
-                left: 24,
-                right: 24,
-                top: 8,
-                bottom: 0
-            }
-        );
     }
 
     /// Textured edges, a dark edge that changes between frames, and a frame

@@ -127,14 +127,9 @@ impl Exposure {
         }
     }
 
-    /// True when the map leaves values as they are.
-    pub fn is_identity(&self) -> bool {
-        !self.stretches()
-    }
-
     /// Map `frame` in place.
     pub fn apply(&self, frame: &mut Rgb) {
-        if self.is_identity() {
+        if !self.stretches() {
             return;
         }
         let (lo, g) = (self.lo, self.gain());
@@ -197,11 +192,11 @@ mod tests {
         let full = frame(256, 4, |x, _| x as f32 / 255.0);
         let e = Exposure::measure(std::slice::from_ref(&full));
         assert!(e.lo < 0.01 && e.hi > 0.99, "{e:?}");
-        assert!(e.is_identity() && e.gain() == 1.0);
+        assert!(!e.stretches() && e.gain() == 1.0);
         // Red and blue span [0.2, 0.9], green (half of red) [0.1, 0.45].
         let mid = frame(256, 4, |x, _| 0.2 + 0.7 * x as f32 / 255.0);
         let e = Exposure::measure(std::slice::from_ref(&mid));
-        assert!(e.is_identity(), "{e:?}");
+        assert!(!e.stretches(), "{e:?}");
         assert_eq!(e.applied(mid.clone()).c, mid.c);
         let black = frame(16, 16, |_, _| 0.0);
         let e = Exposure::measure(std::slice::from_ref(&black));
@@ -213,6 +208,6 @@ mod tests {
             c: [plane.clone(), plane.clone(), plane],
         };
         assert_eq!(Exposure::measure(std::slice::from_ref(&flat)).gain(), 16.0);
-        assert!(Exposure::measure(&[]).is_identity());
+        assert!(!Exposure::measure(&[]).stretches());
     }
 }

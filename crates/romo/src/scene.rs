@@ -420,11 +420,6 @@ fn segment_sequence(
             start,
             len: end - start,
         };
-        let sub_full = Window {
-            src: full,
-            start,
-            len: end - start,
-        };
         // Each window counts its own frames: say which window it is.
         let labelled = |stage: &str, done: usize, total: usize| {
             progress(
@@ -439,7 +434,14 @@ fn segment_sequence(
         let first = usize::from(k > 0);
         let t = Instant::now();
         write_outputs(
-            (&sub, &sub_full, borders),
+            (
+                &Window {
+                    src: full,
+                    start,
+                    len: end - start,
+                },
+                borders,
+            ),
             &seg.probs,
             seg.exposure,
             first,
@@ -619,11 +621,11 @@ fn merge_window(mut whole: RomoReport, part: RomoReport, start: usize, shared: b
 
 /// Masks (and overlays, probabilities) of `src`'s frames `first ..` from
 /// their grid probabilities; the frames (guide and overlay) through
-/// `exposure`. `src` is what was segmented: `full`'s frames between their
+/// `exposure`. What was segmented is `src`'s frames between their
 /// `borders`, whose bars are masked.
 #[allow(clippy::too_many_arguments)]
 fn write_outputs(
-    (src, full, borders): (&dyn FrameSource, &dyn FrameSource, crate::borders::Borders),
+    (src, borders): (&dyn FrameSource, crate::borders::Borders),
     probs: &[Plane],
     exposure: Exposure,
     first: usize,
@@ -640,12 +642,16 @@ fn write_outputs(
         .try_for_each(|i| -> Result<()> {
             // The guide as the stages saw it: the guided filter's ε is in
             // absolute grey levels.
-            let mut frame = exposure.applied(src.frame(i)?);
-            let mut prob = upsample_probability(&probs[i], &frame, &opts.refine);
-            if !borders.is_empty() {
-                frame = exposure.applied(full.frame(i)?);
-                prob = crate::borders::paste(&prob, &borders, (frame.w(), frame.h()), 1.0);
-            }
+            // Each frame is read once: the guide is its content, the overlay
+            // the whole frame.
+            let frame = exposure.applied(src.frame(i)?);
+            let prob = if borders.is_empty() {
+                upsample_probability(&probs[i], &frame, &opts.refine)
+            } else {
+                let guide = crate::borders::crop(&frame, &borders);
+                let content = upsample_probability(&probs[i], &guide, &opts.refine);
+                crate::borders::paste(&content, &borders, (frame.w(), frame.h()), 1.0)
+            };
             let sized = match sizes.and_then(|s| s.get(i)) {
                 Some(&(w, h)) if (w, h) != (prob.w, prob.h) => {
                     std::borrow::Cow::Owned(prob.resize(w, h))
