@@ -121,9 +121,21 @@ mod tests {
     /// clap's own consistency checks over every subcommand: no two flags
     /// share a name or short form, defaults parse with their value parsers,
     /// `requires` / `conflicts_with` name existing arguments.
+    /// clap runs those checks only in a debug build of clap, so ids are
+    /// also checked here: a release build must not let one flag set two
+    /// fields (`--no-image-fixed` once turned off region completion).
     #[test]
     fn command_line_definition_is_consistent() {
         Cli::command().debug_assert();
+        fn unique_ids(cmd: &clap::Command) {
+            let mut ids: Vec<&str> = cmd.get_arguments().map(|a| a.get_id().as_str()).collect();
+            let n = ids.len();
+            ids.sort_unstable();
+            ids.dedup();
+            assert_eq!(ids.len(), n, "{}: a flag id is used twice", cmd.get_name());
+            cmd.get_subcommands().for_each(unique_ids);
+        }
+        unique_ids(&Cli::command());
     }
 
     #[test]

@@ -292,10 +292,14 @@ fn dump(
 ) -> Res<()> {
     let (gw, gh) = seg.report.grid;
     let small = frame.resize(gw, gh);
-    let img = image::RgbImage::from_fn(4 * gw as u32, gh as u32, |x, y| {
+    let ns = seg.stages.len();
+    let img = image::RgbImage::from_fn((4 + ns) as u32 * gw as u32, gh as u32, |x, y| {
         let (k, x) = (x as usize / gw, x as usize % gw);
         let j = y as usize * gw + x;
         let b = |v: f32| (v.clamp(0.0, 1.0) * 255.0) as u8;
+        if k >= 4 {
+            return image::Rgb([b(seg.stages[k - 4].1[i].data[j]); 3]);
+        }
         match k {
             0 => image::Rgb([
                 b(small.c[0].data[j]),

@@ -107,6 +107,22 @@ mod tests {
             .romo
     }
 
+    /// Every flag has its own id: two flattened structs with a field of
+    /// the same name (`enabled`) would otherwise share one, and one flag
+    /// would set both fields.
+    #[test]
+    fn flag_ids_are_unique() {
+        use clap::CommandFactory;
+        let mut ids: Vec<String> = Cmd::command()
+            .get_arguments()
+            .map(|a| a.get_id().to_string())
+            .collect();
+        let n = ids.len();
+        ids.sort();
+        ids.dedup();
+        assert_eq!(ids.len(), n, "{ids:?}");
+    }
+
     /// No flags: the base comes back unchanged, on/off fields included.
     #[test]
     fn absent_flags_keep_the_base() {
@@ -133,6 +149,7 @@ mod tests {
             "--iterations",
             "1",
             "--no-cheirality",
+            "--no-image-fixed",
             "--overlays",
             "--region-k",
             "2.5",
@@ -148,6 +165,8 @@ mod tests {
         assert_eq!(got.iterations, 1);
         assert_eq!(got.seed, 5);
         assert!(!got.labels.cheirality);
+        assert!(!got.overlay.enabled);
+        assert!(got.regions.enabled);
         assert!(got.labels.three_view);
         assert!(got.overlays);
         assert_eq!(got.regions.k, 2.5);

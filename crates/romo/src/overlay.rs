@@ -38,7 +38,7 @@ use serde::{Deserialize, Serialize};
 pub struct OverlayOptions {
     /// Mark content fixed in the image (logos, burned-in text, letterbox
     /// bars) as moving in every frame (ours; default true).
-    #[cfg_attr(feature = "cli", arg(long = "no-image-fixed", action = clap::ArgAction::SetFalse, help = "Do not mark content fixed in the image (logos, burned-in text) as moving"))]
+    #[cfg_attr(feature = "cli", arg(id = "image_fixed", long = "no-image-fixed", action = clap::ArgAction::SetFalse, help = "Do not mark content fixed in the image (logos, burned-in text) as moving"))]
     pub enabled: bool,
     /// A pair shows camera motion when the median flow of its textured,
     /// cycle-consistent pixels is at least this (default 1.0 grid px,

@@ -26,7 +26,7 @@ use serde::{Deserialize, Serialize};
 pub struct RegionOptions {
     /// Complete the probability over flow segments (default true; see the
     /// README for what it gains and costs).
-    #[cfg_attr(feature = "cli", arg(long = "no-region-completion", action = clap::ArgAction::SetFalse, help = "Turn off region completion (a segment of the flow field mostly called moving becomes moving as a whole, except its confidently static pixels)"))]
+    #[cfg_attr(feature = "cli", arg(id = "region_completion", long = "no-region-completion", action = clap::ArgAction::SetFalse, help = "Turn off region completion (a segment of the flow field mostly called moving becomes moving as a whole, except its confidently static pixels)"))]
     pub enabled: bool,
     /// Felzenszwalb–Huttenlocher scale `k` (in units of the normalised flow
     /// difference × pixels; larger merges more; default 4).
