@@ -152,14 +152,24 @@ pub fn image_fixed(
     let mut chances = vec![0u32; n];
     // Frame `from` against frame `to` with the flow `f` from `from` to `to`.
     let mut vote = |f: &Flow, from: &Plane, to: &Plane| {
-        for i in 0..n {
-            let (x, y) = ((i % w) as f32 + f.u.data[i], (i / w) as f32 + f.v.data[i]);
-            if x < 0.0 || y < 0.0 || x > (w - 1) as f32 || y > (h - 1) as f32 {
-                continue;
-            }
+        let landed: Vec<Option<f32>> = (0..n)
+            .map(|i| {
+                let (x, y) = ((i % w) as f32 + f.u.data[i], (i / w) as f32 + f.v.data[i]);
+                let inside = x >= 0.0 && y >= 0.0 && x <= (w - 1) as f32 && y <= (h - 1) as f32;
+                inside.then(|| to.bilinear(x, y))
+            })
+            .collect();
+        // The camera's exposure may change between the frames (auto
+        // exposure, flicker): `to` is predicted from `from` times the
+        // pair's gain, else a brighter frame makes the flow's match look
+        // worse than staying put wherever the scene happens to be darker.
+        let gain = exposure_gain(from, &landed);
+        for (i, l) in landed.iter().enumerate() {
+            let Some(l) = l else { continue };
             chances[i] += 1;
-            let d_fixed = (to.data[i] - from.data[i]).abs();
-            let d_flow = (to.bilinear(x, y) - from.data[i]).abs();
+            let predicted = gain * from.data[i];
+            let d_fixed = (to.data[i] - predicted).abs();
+            let d_flow = (l - predicted).abs();
             if d_flow > d_fixed + o.margin {
                 votes[i] += 1;
             }
@@ -186,6 +196,26 @@ pub fn image_fixed(
     }
     Overlay::Found(dilate(&fixed, w, h))
 }
+
+/// The gain of a pair's exposure: the median over pixels of where the flow
+/// landed in the next frame (`landed`, None outside it) over the pixel's
+/// own grey level, in [1/2, 2]; 1 when too few pixels are bright enough to
+/// tell (a ratio of near-black levels is noise).
+fn exposure_gain(from: &Plane, landed: &[Option<f32>]) -> f32 {
+    let mut ratios: Vec<f64> = from
+        .data
+        .iter()
+        .zip(landed)
+        .filter_map(|(a, b)| b.filter(|_| *a > MIN_GAIN_LEVEL).map(|b| f64::from(b / a)))
+        .collect();
+    if ratios.len() * 10 < from.data.len() {
+        return 1.0;
+    }
+    (median(&mut ratios) as f32).clamp(0.5, 2.0)
+}
+
+/// Grey level below which a pixel does not vote on the exposure gain.
+const MIN_GAIN_LEVEL: f32 = 0.05;
 
 /// `m` without its 4-connected components smaller than `min_size`.
 fn drop_small(m: &[bool], w: usize, h: usize, min_size: usize) -> Vec<bool> {
@@ -271,14 +301,31 @@ mod tests {
         block: (usize, usize, usize, usize),
         opaque: bool,
     ) -> Overlay {
+        flickering_pan(frames, speed, block, opaque, 0.0)
+    }
+
+    /// [`pan`] with every other frame's exposure `1 + flicker`, the others'
+    /// `1 − flicker`.
+    fn flickering_pan(
+        frames: usize,
+        speed: f32,
+        block: (usize, usize, usize, usize),
+        opaque: bool,
+        flicker: f32,
+    ) -> Overlay {
         let (bx, by, bw, bh) = block;
         let inside = |x: usize, y: usize| x >= bx && x < bx + bw && y >= by && y < by + bh;
         let greys: Vec<Plane> = (0..frames)
             .map(|t| {
+                let gain = if t % 2 == 0 {
+                    1.0 - flicker
+                } else {
+                    1.0 + flicker
+                };
                 Plane::from_fn(W, H, |x, y| {
                     let scene = tex(x as f32 - speed * t as f32, y as f32);
                     let logo = 0.5 + 0.4 * ((x as f32 * 1.7).sin() * (y as f32 * 1.3).cos());
-                    match (inside(x, y), opaque) {
+                    gain * match (inside(x, y), opaque) {
                         (false, _) => scene,
                         (true, true) => logo,
                         (true, false) => 0.5 * scene + 0.5 * logo,
@@ -348,6 +395,40 @@ mod tests {
             panic!("no decision");
         };
         assert!(m.iter().all(|b| !b));
+    }
+
+    #[test]
+    fn a_flickering_pan_marks_nothing() {
+        // ±15% exposure every other frame: without the pair's gain, a
+        // brighter next frame votes "fixed" wherever the scene is darker
+        // where the pixel stands.
+        let Overlay::Found(m) = flickering_pan(20, 2.0, (0, 0, 0, 0), false, 0.15) else {
+            panic!("no decision");
+        };
+        let k = m.iter().filter(|b| **b).count();
+        assert_eq!(k, 0, "{k} pixels marked");
+    }
+
+    #[test]
+    fn a_semi_transparent_logo_is_found_under_flicker() {
+        assert_block(
+            flickering_pan(20, 2.0, (40, 4, 12, 6), false, 0.15),
+            (40, 4, 12, 6),
+            2 * (14 + 8),
+        );
+    }
+
+    #[test]
+    fn the_exposure_gain_is_the_median_ratio() {
+        let from = Plane::from_fn(W, H, |x, y| tex(x as f32, y as f32));
+        let landed: Vec<Option<f32>> = from.data.iter().map(|v| Some(1.2 * v)).collect();
+        assert!((exposure_gain(&from, &landed) - 1.2).abs() < 1e-5);
+        // Too few pixels landed in the frame: no estimate.
+        let out = vec![None; W * H];
+        assert_eq!(exposure_gain(&from, &out), 1.0);
+        // A black frame: no pixel bright enough.
+        let black = Plane::filled(W, H, 0.0);
+        assert_eq!(exposure_gain(&black, &landed), 1.0);
     }
 
     #[test]
