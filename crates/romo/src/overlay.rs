@@ -9,8 +9,10 @@
 //! into the scene. [`image_fixed`] finds it from the flow the mask stage
 //! already has: in a pair where the camera clearly moved, a pixel votes
 //! "fixed" when the next frame at the same pixel matches it better than the
-//! next frame where the flow says it went. The flow of a semi-transparent
-//! logo follows the scene behind it, so the logo votes in most such pairs;
+//! next frame where the flow says it went, both against the pixel times the
+//! pair's exposure gain (auto exposure and flicker change the whole frame's
+//! brightness). The flow of a semi-transparent logo follows the scene
+//! behind it, so the logo votes in most such pairs;
 //! a scene pixel votes only where the flow fails, which moves with the
 //! camera. Pixels that vote in enough pairs are content fixed in the image.
 //!
