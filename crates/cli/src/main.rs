@@ -121,9 +121,11 @@ mod tests {
     /// clap's own consistency checks over every subcommand: no two flags
     /// share a name or short form, defaults parse with their value parsers,
     /// `requires` / `conflicts_with` name existing arguments.
+    ///
     /// clap runs those checks only in a debug build of clap, so ids are
-    /// also checked here: a release build must not let one flag set two
-    /// fields (`--no-image-fixed` once turned off region completion).
+    /// also checked here: two flattened fields of one name (`enabled` in the
+    /// overlay and region options) would share an id, and one flag would
+    /// set both.
     #[test]
     fn command_line_definition_is_consistent() {
         Cli::command().debug_assert();

@@ -113,8 +113,9 @@ pub struct MlpOptions {
     /// (breakdance U 0.63 → 0.81 for L 0.977 → 0.894; the U it adds is the
     /// audience DAVIS does not annotate), where a fixed 0.7 gives mean J
     /// 0.592 (goat 0.695 → 0.223). Over seeds 0–2 no DAVIS run keeps it
-    /// ([`MlpOptions::trial_significance`]); at every third frame goat's seed 0 keeps
-    /// it and falls from 0.602 to 0.181: its U lies mostly off the goat (the
+    /// ([`MlpOptions::trial_significance`]); at every third frame goat's
+    /// seed 0 keeps it (z 10.6) and scores 0.199 (0.602 at the base
+    /// weight): its U lies mostly off the goat (the
     /// near rocks' parallax in pairs scored by a homography, where F
     /// explains every fit point, the followed goat included; under F alone
     /// U precision is still 0.42; GMFlow does no better), which no
@@ -641,6 +642,7 @@ pub struct WeightTrial {
     pub raised_error: f64,
     /// `base_error − raised_error` in standard errors of the difference
     /// (the two networks' [`error_rate_se`] added in quadrature).
+    #[serde(default)]
     pub z: f64,
     /// U / L recall of the base network.
     pub base_recall: (f64, f64),
