@@ -157,20 +157,20 @@ fn square_j(seg: &romo::pipeline::Segmentation) -> f64 {
     js.iter().sum::<f64>() / js.len() as f64
 }
 
+/// `f` with every channel value passed through `g`.
+fn levels(f: Rgb, g: impl Fn(f32) -> f32 + Sync) -> Rgb {
+    Rgb {
+        c: f.c.map(|c| c.map(&g)),
+    }
+}
+
 /// The video at a tenth of its brightness, in 8 bits (values 2–23 of 255):
 /// every gradient is ten times smaller, so no pixel passed the texture
 /// thresholds and nothing was found moving. The exposure map stretches it
 /// back (with a warning), and the square is found as in the original.
 #[test]
 fn an_underexposed_video_is_segmented_like_the_original() {
-    let dark = |f: Rgb| Rgb {
-        c: f.c.map(|mut c| {
-            c.data
-                .iter_mut()
-                .for_each(|v| *v = (*v * 0.1 * 255.0).round() / 255.0);
-            c
-        }),
-    };
+    let dark = |f: Rgb| levels(f, |v| (v * 0.1 * 255.0).round() / 255.0);
     let normal: Vec<Rgb> = (0..10).map(dot_frame).collect();
     let darkened: Vec<Rgb> = normal.iter().cloned().map(dark).collect();
     let (a, b) = (run(normal), run(darkened));
@@ -206,12 +206,7 @@ fn an_underexposed_video_is_segmented_like_the_original() {
 fn a_flickering_video_has_no_content_fixed_in_the_image() {
     let flicker = |(t, f): (usize, Rgb)| {
         let g = if t % 2 == 0 { 0.88 } else { 1.12 };
-        Rgb {
-            c: f.c.map(|mut c| {
-                c.data.iter_mut().for_each(|v| *v = (*v * g).min(1.0));
-                c
-            }),
-        }
+        levels(f, |v| (v * g).min(1.0))
     };
     let normal: Vec<Rgb> = (0..10).map(dot_frame).collect();
     let flickering: Vec<Rgb> = normal.iter().cloned().enumerate().map(flicker).collect();
