@@ -83,8 +83,9 @@ impl FlowBackend {
 #[serde(default)]
 pub struct RomoOptions {
     /// Long side of the working grid in px (default 256). 384 (flow on
-    /// 768 px frames) gives DAVIS mean J 0.738 instead of 0.734 (seeds
-    /// 0–2) at half the speed (`docs/results.md`).
+    /// 768 px frames) gave DAVIS mean J 0.738 instead of 0.734 (seeds 0–2,
+    /// before the cut's colour-weighted flow links) at half the speed
+    /// (`docs/results.md`).
     #[cfg_attr(feature = "cli", arg(long, required = false))]
     pub grid_max_side: usize,
     /// Flow is computed on frames of `flow_scale` × the grid (default 2).
