@@ -764,6 +764,36 @@ mod tests {
         }
     }
 
+    /// The evidence of a video with forward flow only (each pair's flow and
+    /// its cycle-valid pixels), `v` = 1 in every frame, no U and RoMo's
+    /// default factors.
+    fn forward_only<'a>(
+        probs: &'a [Plane],
+        s: Vec<&'a [f32]>,
+        textured: &'a [Vec<bool>],
+        no_u: &'a [bool],
+        l: Vec<&'a [bool]>,
+        rgb: &'a [Rgb],
+        (fwd, valid_f): (&'a [Flow], &'a [Vec<bool>]),
+    ) -> Evidence<'a> {
+        Evidence {
+            probs,
+            v: vec![1.0; s.len()],
+            u: vec![no_u; s.len()],
+            s,
+            textured,
+            l,
+            rgb,
+            fwd,
+            valid_f,
+            bwd: &[],
+            valid_b: &[],
+            u_factor: 1.0,
+            l_factor: 0.1,
+            geometry_zero: None,
+        }
+    }
+
     fn flat_rgb(w: usize, h: usize, f: impl Fn(usize, usize) -> f32 + Sync) -> Rgb {
         let p = Plane::from_fn(w, h, f);
         Rgb {
@@ -816,9 +846,8 @@ mod tests {
                     .collect()
             })
             .collect();
-        let v = 1.0;
-        // Residual inside the square: weak (between L and U) in frames 0–2,
-        // strong after; background at 0.01·v.
+        // Residual inside the square (v = 1): weak (between L and U) in
+        // frames 0–2, strong after; background at 0.01·v.
         let s: Vec<Vec<f32>> = (0..n)
             .map(|t| {
                 (0..w * h)
@@ -840,22 +869,15 @@ mod tests {
             .iter()
             .map(|f| f.iter().map(|r| *r < 0.1).collect())
             .collect();
-        let e = Evidence {
-            probs: &probs,
-            s: s.iter().map(|v| v.as_slice()).collect(),
-            v: vec![v; n],
-            textured: &textured,
-            u: vec![&no[..]; n],
-            l: l.iter().map(|v| v.as_slice()).collect(),
-            rgb: &rgb,
-            fwd: &fwd,
-            valid_f: &valid_f,
-            bwd: &[],
-            valid_b: &[],
-            u_factor: 1.0,
-            l_factor: 0.1,
-            geometry_zero: None,
-        };
+        let e = forward_only(
+            &probs,
+            s.iter().map(|v| v.as_slice()).collect(),
+            &textured,
+            &no,
+            l.iter().map(|v| v.as_slice()).collect(),
+            &rgb,
+            (&fwd, &valid_f),
+        );
         let o = ObjectOptions::default();
         let m = graph_cut(&e, &o);
         for (t, mt) in m.iter().enumerate() {
@@ -905,22 +927,15 @@ mod tests {
         let textured = vec![vec![true; w * h]; 2];
         let no = vec![false; w * h];
         let l0: Vec<bool> = s0.iter().map(|r| *r < 0.1).collect();
-        let e = Evidence {
-            probs: &probs,
-            s: vec![&s0, &s1],
-            v: vec![1.0; 2],
-            textured: &textured,
-            u: vec![&no[..]; 2],
-            l: vec![&l0, &no],
-            rgb: &rgb,
-            fwd: &fwd,
-            valid_f: &valid_f,
-            bwd: &[],
-            valid_b: &[],
-            u_factor: 1.0,
-            l_factor: 0.1,
-            geometry_zero: None,
-        };
+        let e = forward_only(
+            &probs,
+            vec![&s0, &s1],
+            &textured,
+            &no,
+            vec![&l0, &no],
+            &rgb,
+            (&fwd, &valid_f),
+        );
         let o = ObjectOptions {
             colour_weight: 0.0,
             ..ObjectOptions::default()
