@@ -643,6 +643,17 @@ fn solve(pairs: &Graph, a: &[Vec<f32>]) -> Vec<Vec<bool>> {
     cut.source_side.chunks(np).map(|c| c.to_vec()).collect()
 }
 
+/// Squared RGB distance between pixel `i` of `a` and pixel `j` of `b`.
+fn colour_d2(a: &Rgb, i: usize, b: &Rgb, j: usize) -> f32 {
+    a.c.iter()
+        .zip(&b.c)
+        .map(|(pa, pb)| {
+            let d = pa.data[i] - pb.data[j];
+            d * d
+        })
+        .sum()
+}
+
 /// The space–time graph's pairwise edges (module doc), without terminals.
 fn pairwise(e: &Evidence, o: &ObjectOptions) -> Graph {
     let n = e.probs.len();
@@ -652,14 +663,7 @@ fn pairwise(e: &Evidence, o: &ObjectOptions) -> Graph {
     g.reserve_edges(n * np * 3);
     if o.smoothness > 0.0 {
         for (t, rgb) in e.rgb.iter().enumerate().take(n) {
-            let d2 = |i: usize, j: usize| -> f32 {
-                (0..3)
-                    .map(|k| {
-                        let d = rgb.c[k].data[i] - rgb.c[k].data[j];
-                        d * d
-                    })
-                    .sum()
-            };
+            let d2 = |i: usize, j: usize| colour_d2(rgb, i, rgb, j);
             let mut sum = 0f64;
             let mut cnt = 0usize;
             for y in 0..h {
@@ -708,14 +712,7 @@ fn pairwise(e: &Evidence, o: &ObjectOptions) -> Graph {
                 })
                 .collect();
             let (a, b) = (&e.rgb[p], &e.rgb[p + 1]);
-            let d2 = |i: usize, j: usize| -> f32 {
-                (0..3)
-                    .map(|k| {
-                        let d = a.c[k].data[i] - b.c[k].data[j];
-                        d * d
-                    })
-                    .sum()
-            };
+            let d2 = |i: usize, j: usize| colour_d2(a, i, b, j);
             let beta = if o.temporal_contrast && !links.is_empty() {
                 let mean =
                     links.iter().map(|&(i, j)| d2(i, j) as f64).sum::<f64>() / links.len() as f64;
