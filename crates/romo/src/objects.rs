@@ -654,6 +654,12 @@ fn colour_d2(a: &Rgb, i: usize, b: &Rgb, j: usize) -> f32 {
         .sum()
 }
 
+/// GrabCut's contrast factor `β = 1 / (2⟨|ΔI|²⟩)` from a sum of squared
+/// colour differences over `count` edges.
+fn contrast_beta(sum: f64, count: usize) -> f32 {
+    1.0 / (2.0 * (sum / count.max(1) as f64).max(1e-8)) as f32
+}
+
 /// The space–time graph's pairwise edges (module doc), without terminals.
 fn pairwise(e: &Evidence, o: &ObjectOptions) -> Graph {
     let n = e.probs.len();
@@ -679,7 +685,7 @@ fn pairwise(e: &Evidence, o: &ObjectOptions) -> Graph {
                     }
                 }
             }
-            let beta = 1.0 / (2.0 * (sum / cnt.max(1) as f64).max(1e-8)) as f32;
+            let beta = contrast_beta(sum, cnt);
             let cap = |i: usize, j: usize| -> i32 {
                 (o.smoothness * SCALE * (-beta * d2(i, j)).exp()).round() as i32
             };
@@ -702,26 +708,33 @@ fn pairwise(e: &Evidence, o: &ObjectOptions) -> Graph {
     if o.temporal > 0.0 {
         for p in 0..e.fwd.len().min(n - 1).min(e.rgb.len().saturating_sub(1)) {
             let f = &e.fwd[p];
-            let links: Vec<(usize, usize)> = (0..np)
+            let (a, b) = (&e.rgb[p], &e.rgb[p + 1]);
+            // Each link with its squared colour change (0 without the
+            // contrast term, where it is not needed).
+            let links: Vec<(usize, usize, f32)> = (0..np)
                 .filter(|&i| e.valid_f[p][i])
                 .filter_map(|i| {
                     let x = ((i % w) as f32 + f.u.data[i]).round();
                     let y = ((i / w) as f32 + f.v.data[i]).round();
-                    let inside = x >= 0.0 && y >= 0.0 && x < w as f32 && y < h as f32;
-                    inside.then(|| (i, y as usize * w + x as usize))
+                    if !(x >= 0.0 && y >= 0.0 && x < w as f32 && y < h as f32) {
+                        return None;
+                    }
+                    let j = y as usize * w + x as usize;
+                    let d2 = if o.temporal_contrast {
+                        colour_d2(a, i, b, j)
+                    } else {
+                        0.0
+                    };
+                    Some((i, j, d2))
                 })
                 .collect();
-            let (a, b) = (&e.rgb[p], &e.rgb[p + 1]);
-            let d2 = |i: usize, j: usize| colour_d2(a, i, b, j);
-            let beta = if o.temporal_contrast && !links.is_empty() {
-                let mean =
-                    links.iter().map(|&(i, j)| d2(i, j) as f64).sum::<f64>() / links.len() as f64;
-                1.0 / (2.0 * mean.max(1e-8)) as f32
+            let beta = if o.temporal_contrast {
+                contrast_beta(links.iter().map(|l| l.2 as f64).sum(), links.len())
             } else {
                 0.0
             };
-            for (i, j) in links {
-                let c = (o.temporal * SCALE * (-beta * d2(i, j)).exp()).round() as i32;
+            for (i, j, d2) in links {
+                let c = (o.temporal * SCALE * (-beta * d2).exp()).round() as i32;
                 g.add_edge(p * np + i, (p + 1) * np + j, c, c);
             }
         }
