@@ -453,60 +453,58 @@ fn colour_evidence(
     let (tx, ty) = (w.div_ceil(ts), h.div_ceil(ts));
     let nt = tx * ty;
     let tile = |i: usize| (i / w / ts) * tx + (i % w) / ts;
-    // Per frame and tile: foreground then background counts per bin.
-    let counts: Vec<Vec<u32>> = (0..n)
-        .into_par_iter()
-        .map(|t| {
-            let mut c = vec![0u32; nt * 2 * nb];
-            for (i, b) in bins[t].iter().enumerate() {
-                let side = usize::from(!fg_side(t, i));
-                c[(tile(i) * 2 + side) * nb + *b as usize] += 1;
-            }
-            c
-        })
-        .collect();
     let k = o.colour_frames;
     (0..n)
         .into_par_iter()
         .map(|t| {
-            let frames = t.saturating_sub(k)..(t + k + 1).min(n);
+            // Per tile: foreground then background counts per bin over the
+            // frames of the window.
             let mut win = vec![0u32; nt * 2 * nb];
-            for c in &counts[frames] {
-                for (s, v) in win.iter_mut().zip(c) {
-                    *s += v;
+            for f in t.saturating_sub(k)..(t + k + 1).min(n) {
+                for (i, b) in bins[f].iter().enumerate() {
+                    let side = usize::from(!fg_side(f, i));
+                    win[(tile(i) * 2 + side) * nb + *b as usize] += 1;
                 }
             }
-            // Per tile: the ratio table of its 3 × 3 neighbourhood.
-            let mut table = vec![0f32; nt * nb];
-            let mut lf = vec![0f64; nb];
-            let mut lb = vec![0f64; nb];
+            // Per tile: the histograms of its 3 × 3 neighbourhood, and the
+            // ratio of each bin its own pixels use, computed once (most of
+            // the bins are empty in a tile).
+            let mut out = vec![0f32; np];
+            let mut lf = vec![0u32; nb];
+            let mut lb = vec![0u32; nb];
+            let mut memo = vec![f32::NAN; nb];
             for yt in 0..ty {
                 for xt in 0..tx {
-                    lf.fill(0.0);
-                    lb.fill(0.0);
+                    lf.fill(0);
+                    lb.fill(0);
                     for yy in yt.saturating_sub(1)..(yt + 2).min(ty) {
                         for xx in xt.saturating_sub(1)..(xt + 2).min(tx) {
                             let base = (yy * tx + xx) * 2 * nb;
-                            for b in 0..nb {
-                                lf[b] += win[base + b] as f64;
-                                lb[b] += win[base + nb + b] as f64;
+                            for (s, v) in lf.iter_mut().zip(&win[base..base + nb]) {
+                                *s += v;
+                            }
+                            for (s, v) in lb.iter_mut().zip(&win[base + nb..base + 2 * nb]) {
+                                *s += v;
                             }
                         }
                     }
-                    let (sf, sb): (f64, f64) = (lf.iter().sum(), lb.iter().sum());
-                    let row = &mut table[(yt * tx + xt) * nb..(yt * tx + xt + 1) * nb];
-                    for (b, r) in row.iter_mut().enumerate() {
-                        let f = (lf[b] + COLOUR_PRIOR * pf[b]) / (sf + COLOUR_PRIOR);
-                        let g = (lb[b] + COLOUR_PRIOR * pb[b]) / (sb + COLOUR_PRIOR);
-                        *r = ratio(f, g);
+                    let total = |c: &[u32]| c.iter().map(|v| *v as f64).sum::<f64>();
+                    let (sf, sb) = (total(&lf), total(&lb));
+                    memo.fill(f32::NAN);
+                    for y in yt * ts..((yt + 1) * ts).min(h) {
+                        for x in xt * ts..((xt + 1) * ts).min(w) {
+                            let b = bins[t][y * w + x] as usize;
+                            if memo[b].is_nan() {
+                                let f = (lf[b] as f64 + COLOUR_PRIOR * pf[b]) / (sf + COLOUR_PRIOR);
+                                let g = (lb[b] as f64 + COLOUR_PRIOR * pb[b]) / (sb + COLOUR_PRIOR);
+                                memo[b] = ratio(f, g);
+                            }
+                            out[y * w + x] = memo[b];
+                        }
                     }
                 }
             }
-            bins[t]
-                .iter()
-                .enumerate()
-                .map(|(i, b)| table[tile(i) * nb + *b as usize])
-                .collect()
+            out
         })
         .collect()
 }
