@@ -460,8 +460,9 @@ fn colour_evidence(
             // Per tile: foreground then background counts per bin over the
             // frames of the window.
             let mut win = vec![0u32; nt * 2 * nb];
-            for f in t.saturating_sub(k)..(t + k + 1).min(n) {
-                for (i, b) in bins[f].iter().enumerate() {
+            let first = t.saturating_sub(k);
+            for (f, bf) in bins.iter().enumerate().take(t + k + 1).skip(first) {
+                for (i, b) in bf.iter().enumerate() {
                     let side = usize::from(!fg_side(f, i));
                     win[(tile(i) * 2 + side) * nb + *b as usize] += 1;
                 }
@@ -838,6 +839,55 @@ mod tests {
         }
     }
 
+    /// Two frames' evidence: frame 0's residual is over the U threshold
+    /// and its MLP sure that `obj` moves, with small residuals elsewhere
+    /// (L); frame 1's residual is 0.28·v everywhere (between the
+    /// thresholds, a little on the static side), its MLP static.
+    struct SureThenUnsure {
+        probs: Vec<Plane>,
+        s0: Vec<f32>,
+        s1: Vec<f32>,
+        textured: Vec<Vec<bool>>,
+        no: Vec<bool>,
+        l0: Vec<bool>,
+    }
+
+    impl SureThenUnsure {
+        fn new(w: usize, h: usize, obj: impl Fn(usize) -> bool + Sync) -> Self {
+            let s0: Vec<f32> = (0..w * h)
+                .map(|i| if obj(i) { 3.0 } else { 0.01 })
+                .collect();
+            Self {
+                probs: vec![
+                    Plane::from_fn(w, h, |x, y| if obj(y * w + x) { 0.98 } else { 0.1 }),
+                    Plane::filled(w, h, 0.1),
+                ],
+                l0: s0.iter().map(|r| *r < 0.1).collect(),
+                s0,
+                s1: vec![0.28; w * h],
+                textured: vec![vec![true; w * h]; 2],
+                no: vec![false; w * h],
+            }
+        }
+
+        /// With frames `rgb` and forward flow `fwd`.
+        fn evidence<'a>(
+            &'a self,
+            rgb: &'a [Rgb],
+            fwd: (&'a [Flow], &'a [Vec<bool>]),
+        ) -> Evidence<'a> {
+            forward_only(
+                &self.probs,
+                vec![&self.s0, &self.s1],
+                &self.textured,
+                &self.no,
+                vec![&self.l0, &self.no],
+                rgb,
+                fwd,
+            )
+        }
+    }
+
     fn flat_rgb(w: usize, h: usize, f: impl Fn(usize, usize) -> f32 + Sync) -> Rgb {
         let p = Plane::from_fn(w, h, f);
         Rgb {
@@ -959,27 +1009,8 @@ mod tests {
         ];
         let fwd = vec![Flow::zeros(w, h)];
         let valid_f = vec![vec![true; w * h]];
-        // Frame 0: the square's residual is over the U threshold and the MLP
-        // is sure it moves; frame 1: residual 0.28·v (between the
-        // thresholds, a little on the static side), MLP static.
-        let s0: Vec<f32> = (0..w * h).map(|i| if sq(i) { 3.0 } else { 0.01 }).collect();
-        let s1 = vec![0.28f32; w * h];
-        let probs = vec![
-            Plane::from_fn(w, h, |x, y| if sq(y * w + x) { 0.98 } else { 0.1 }),
-            Plane::filled(w, h, 0.1),
-        ];
-        let textured = vec![vec![true; w * h]; 2];
-        let no = vec![false; w * h];
-        let l0: Vec<bool> = s0.iter().map(|r| *r < 0.1).collect();
-        let e = forward_only(
-            &probs,
-            vec![&s0, &s1],
-            &textured,
-            &no,
-            vec![&l0, &no],
-            &rgb,
-            (&fwd, &valid_f),
-        );
+        let d = SureThenUnsure::new(w, h, sq);
+        let e = d.evidence(&rgb, (&fwd, &valid_f));
         let o = ObjectOptions {
             colour_weight: 0.0,
             ..ObjectOptions::default()
@@ -1042,29 +1073,11 @@ mod tests {
             v: Plane::filled(w, h, 0.0),
         }];
         let valid_b = vec![vec![true; w * h]];
-        let s0: Vec<f32> = (0..w * h)
-            .map(|i| if sq0(i % w, i / w) { 3.0 } else { 0.01 })
-            .collect();
-        let s1 = vec![0.28f32; w * h];
-        let probs = vec![
-            Plane::from_fn(w, h, |x, y| if sq0(x, y) { 0.98 } else { 0.1 }),
-            Plane::filled(w, h, 0.1),
-        ];
-        let textured = vec![vec![true; w * h]; 2];
-        let no = vec![false; w * h];
-        let l0: Vec<bool> = s0.iter().map(|r| *r < 0.1).collect();
+        let d = SureThenUnsure::new(w, h, |i| sq0(i % w, i / w));
         let e = Evidence {
             bwd: &bwd,
             valid_b: &valid_b,
-            ..forward_only(
-                &probs,
-                vec![&s0, &s1],
-                &textured,
-                &no,
-                vec![&l0, &no],
-                &rgb,
-                (&fwd, &valid_f),
-            )
+            ..d.evidence(&rgb, (&fwd, &valid_f))
         };
         // No spatial edges: only the links can carry the square.
         let both = ObjectOptions {
