@@ -575,11 +575,6 @@ pub fn propagation_prior(masks: &[Vec<bool>], e: &Evidence, o: &ObjectOptions) -
     let (w, h) = (e.probs[0].w, e.probs[0].h);
     let np = w * h;
     let k_max = o.propagation_frames;
-    let nearest = |x: f32, y: f32| -> Option<usize> {
-        let (xr, yr) = (x.round(), y.round());
-        (xr >= 0.0 && yr >= 0.0 && xr < w as f32 && yr < h as f32)
-            .then(|| yr as usize * w + xr as usize)
-    };
     (0..n)
         .into_par_iter()
         .map(|t| {
@@ -611,7 +606,9 @@ pub fn propagation_prior(masks: &[Vec<bool>], e: &Evidence, o: &ObjectOptions) -
                             let (du, dv) = (flow.u.bilinear(x, y), flow.v.bilinear(x, y));
                             x += du;
                             y += dv;
-                            let Some(next) = nearest(x, y) else { break };
+                            let Some(next) = nearest_pixel(x, y, w, h) else {
+                                break;
+                            };
                             j = next;
                             if masks[to][j] {
                                 votes += weight;
@@ -627,6 +624,13 @@ pub fn propagation_prior(masks: &[Vec<bool>], e: &Evidence, o: &ObjectOptions) -
                 .collect()
         })
         .collect()
+}
+
+/// The index of the pixel nearest to `(x, y)` on a `w × h` grid, if inside.
+fn nearest_pixel(x: f32, y: f32, w: usize, h: usize) -> Option<usize> {
+    let (xr, yr) = (x.round(), y.round());
+    (xr >= 0.0 && yr >= 0.0 && xr < w as f32 && yr < h as f32)
+        .then(|| yr as usize * w + xr as usize)
 }
 
 /// `a += w · b`, per frame and pixel.
@@ -732,11 +736,9 @@ fn pairwise(e: &Evidence, o: &ObjectOptions) -> Graph {
         for p in 0..e.fwd.len().min(n - 1).min(e.rgb.len().saturating_sub(1)) {
             let (a, b) = (&e.rgb[p], &e.rgb[p + 1]);
             // Where pixel i's flow lands (nearest pixel), if in the frame.
-            let land = |f: &Flow, i: usize| -> Option<usize> {
-                let x = ((i % w) as f32 + f.u.data[i]).round();
-                let y = ((i / w) as f32 + f.v.data[i]).round();
-                (x >= 0.0 && y >= 0.0 && x < w as f32 && y < h as f32)
-                    .then(|| y as usize * w + x as usize)
+            let land = |f: &Flow, i: usize| {
+                let (x, y) = ((i % w) as f32, (i / w) as f32);
+                nearest_pixel(x + f.u.data[i], y + f.v.data[i], w, h)
             };
             // Each link (pixel of p, pixel of p + 1) with its squared
             // colour change (0 without the contrast term, where it is not
@@ -1449,7 +1451,6 @@ mod tests {
         assert!(o.validate().is_ok());
     }
 
-    /// A textureless pixel's residual is no evidence.
     /// A near-black object (0.05) on dark ground (0.10), each side its
     /// own seeds: 8 bins per channel put both in bin 0 and the colour term
     /// cannot tell them apart; 16 bins give the object a positive and the
@@ -1464,18 +1465,24 @@ mod tests {
         let textured = vec![vec![true; w * h]];
         let no = vec![false; w * h];
         let e = one_frame(&probs, &s, 1.0, &textured, &no, &no, &rgb);
-        let term = |bins: usize| {
+        let term = |bins: usize, tile: usize| {
             let o = ObjectOptions {
                 colour_bins: bins,
-                colour_tile: 0,
+                colour_tile: tile,
                 ..ObjectOptions::default()
             };
             colour_evidence(&e, &colour_bins(&e, bins), &|_, i| obj(i), &o).remove(0)
         };
-        let coarse = term(8);
+        let coarse = term(8, 0);
         assert!(coarse.iter().all(|c| *c == coarse[0]), "one bin, one value");
-        let fine = term(16);
-        assert!((0..w * h).all(|i| (fine[i] > 0.5) == obj(i) && (fine[i] < -0.5) != obj(i)));
+        // The video's model, and local models on 8-px tiles.
+        for tile in [0, 8] {
+            let fine = term(16, tile);
+            assert!(
+                (0..w * h).all(|i| (fine[i] > 0.5) == obj(i) && (fine[i] < -0.5) != obj(i)),
+                "tile {tile}: {fine:?}"
+            );
+        }
         let refused = ObjectOptions {
             colour_bins: 33,
             ..ObjectOptions::default()
@@ -1483,6 +1490,7 @@ mod tests {
         assert!(refused.validate().is_err());
     }
 
+    /// A textureless pixel's residual is no evidence.
     #[test]
     fn geometry_needs_texture_and_sits_between_the_thresholds() {
         assert_eq!(geometry(5.0, 1.0, false, 1.0, 0.1, None), None);
