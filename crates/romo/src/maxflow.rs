@@ -6,6 +6,9 @@
 //! for choosing new parents. Capacities are integers, so the search always
 //! terminates and the cut is exact.
 //!
+//! [`Network`] keeps the compressed graph for repeated cuts with new
+//! terminal capacities, each starting from the previous flow.
+//!
 //! Used by [`crate::objects`] for the graph-cut object refinement: one node
 //! per grid pixel and frame, terminal edges from the unary evidence, edges
 //! between neighbouring pixels and along the flow between frames.
@@ -27,7 +30,7 @@ pub struct Graph {
     /// Source capacity minus sink capacity per node (the flow both can
     /// carry is already counted in `base_flow`).
     tr: Vec<i64>,
-    edges: Vec<(u32, u32, i32, i32)>,
+    edges: Vec<Edge>,
     base_flow: i64,
 }
 
@@ -84,10 +87,51 @@ impl Graph {
 
     /// Maximum flow and the minimum cut's source side.
     pub fn max_flow(self) -> Cut {
-        let n = self.tr.len();
+        let mut net = Network::new(self.tr.len(), &[self.edges]);
+        let mut cut = net.solve(&self.tr);
+        cut.flow += self.base_flow;
+        cut
+    }
+}
+
+/// A pairwise edge `(i, j, cap, rev)`: i → j with `cap`, j → i with `rev`.
+pub type Edge = (u32, u32, i32, i32);
+
+/// A graph's pairwise edges in compressed adjacency, cut again and again
+/// with different terminal capacities (GrabCut's rounds re-estimate only
+/// the unary terms).
+///
+/// Each solve starts from the flow the previous one left on the pairwise
+/// edges (Kohli & Torr, "Dynamic Graph Cuts", TPAMI 2007): the terminals'
+/// residuals move by the change of their capacities, which is a valid flow
+/// of the new graph up to a constant on both terminal edges of a node, and
+/// the search trees are grown afresh. The source side returned is the set
+/// of nodes reachable from the source in the final residual graph, which is
+/// the same for every maximum flow, so a warm solve gives the cold solve's
+/// cut exactly.
+#[derive(Debug, Clone)]
+pub struct Network {
+    s: Solver,
+    /// Capacities of the arcs as built.
+    cap0: Vec<i32>,
+    /// Terminals (source − sink capacity) of the last solve.
+    last: Vec<i64>,
+}
+
+impl Network {
+    /// The network of nodes `0..n` with the edges of `parts` (edges with
+    /// `i == j` or without capacity are left out, negative capacities
+    /// count as 0). Node indices must be below `n`.
+    pub fn new(n: usize, parts: &[Vec<Edge>]) -> Self {
+        let edges = || {
+            parts
+                .iter()
+                .flatten()
+                .filter(|e| e.0 != e.1 && (e.2 > 0 || e.3 > 0))
+        };
         // Compressed adjacency: arcs of node i at first[i]..first[i + 1].
         let mut first = vec![0u32; n + 1];
-        for &(i, j, _, _) in &self.edges {
+        for &(i, j, _, _) in edges() {
             first[i as usize + 1] += 1;
             first[j as usize + 1] += 1;
         }
@@ -99,43 +143,90 @@ impl Graph {
         let mut cap = vec![0i32; m];
         let mut sister = vec![0u32; m];
         let mut fill: Vec<u32> = first[..n].to_vec();
-        for &(i, j, c, r) in &self.edges {
+        for &(i, j, c, r) in edges() {
             let a = fill[i as usize];
             fill[i as usize] += 1;
             let b = fill[j as usize];
             fill[j as usize] += 1;
             head[a as usize] = j;
-            cap[a as usize] = c;
+            cap[a as usize] = c.max(0);
             sister[a as usize] = b;
             head[b as usize] = i;
-            cap[b as usize] = r;
+            cap[b as usize] = r.max(0);
             sister[b as usize] = a;
         }
-        drop(self.edges);
-        let mut s = Solver {
-            first,
-            head,
-            cap,
-            sister,
-            tr: self.tr,
-            parent: vec![NONE; n],
-            tree: vec![FREE; n],
-            ts: vec![0; n],
-            dist: vec![0; n],
-            active: vec![false; n],
-            queue: VecDeque::new(),
-            orphans: VecDeque::new(),
-            time: 0,
-            flow: self.base_flow,
-        };
-        s.run();
-        Cut {
-            flow: s.flow,
-            source_side: s.tree.iter().map(|t| *t == SOURCE).collect(),
+        Self {
+            cap0: cap.clone(),
+            last: vec![0; n],
+            s: Solver {
+                first,
+                head,
+                cap,
+                sister,
+                tr: vec![0; n],
+                parent: vec![NONE; n],
+                tree: vec![FREE; n],
+                ts: vec![0; n],
+                dist: vec![0; n],
+                active: vec![false; n],
+                queue: VecDeque::new(),
+                orphans: VecDeque::new(),
+                time: 0,
+            },
         }
+    }
+
+    /// Number of nodes.
+    pub fn len(&self) -> usize {
+        self.last.len()
+    }
+
+    /// True when the network has no nodes.
+    pub fn is_empty(&self) -> bool {
+        self.last.is_empty()
+    }
+
+    /// The minimum cut with `terminals[i]` = node i's source capacity
+    /// minus its sink capacity (one value per node). `Cut::flow` is the
+    /// cut's capacity without the part both terminal edges of a node
+    /// share (`min(source, sink)`, which every cut pays).
+    pub fn solve(&mut self, terminals: &[i64]) -> Cut {
+        assert_eq!(terminals.len(), self.len(), "one terminal value per node");
+        let s = &mut self.s;
+        for ((r, new), old) in s.tr.iter_mut().zip(terminals).zip(&mut self.last) {
+            *r += new - *old;
+            *old = *new;
+        }
+        s.parent.fill(NONE);
+        s.tree.fill(FREE);
+        s.ts.fill(0);
+        s.dist.fill(0);
+        s.active.fill(false);
+        s.queue.clear();
+        s.orphans.clear();
+        s.time = 0;
+        s.run();
+        let source_side: Vec<bool> = s.tree.iter().map(|t| *t == SOURCE).collect();
+        // The cut's capacity: terminal edges it severs, and the arcs from
+        // the source side to the sink side as built.
+        let mut flow = 0i64;
+        for (i, &d) in terminals.iter().enumerate() {
+            if source_side[i] {
+                flow += (-d).max(0);
+                for a in s.first[i]..s.first[i + 1] {
+                    if !source_side[s.head[a as usize] as usize] {
+                        flow += i64::from(self.cap0[a as usize]);
+                    }
+                }
+            } else {
+                flow += d.max(0);
+            }
+        }
+        Cut { flow, source_side }
     }
 }
 
+#[derive(Debug, Clone)]
 struct Solver {
     first: Vec<u32>,
     head: Vec<u32>,
@@ -150,7 +241,6 @@ struct Solver {
     queue: VecDeque<u32>,
     orphans: VecDeque<u32>,
     time: u32,
-    flow: i64,
 }
 
 impl Solver {
@@ -294,7 +384,6 @@ impl Solver {
             }
             k = self.head[p as usize];
         }
-        self.flow += b;
     }
 
     /// Find each orphan a new parent in its tree whose path reaches the
@@ -481,6 +570,53 @@ mod tests {
                 }
             }
             assert_eq!(cap, want, "trial {trial}: cut capacity");
+        }
+    }
+
+    /// Cutting one network again with new terminals, from the flow the
+    /// previous cut left, gives the cut and the flow of a graph built
+    /// afresh with those terminals, on random graphs.
+    #[test]
+    fn warm_solves_match_cold_ones() {
+        let mut rng = rand_pcg::Pcg64::seed_from_u64(11);
+        for trial in 0..200 {
+            let n = rng.random_range(1..40);
+            let edges: Vec<Edge> = (0..rng.random_range(0..4 * n + 1))
+                .map(|_| {
+                    (
+                        rng.random_range(0..n) as u32,
+                        rng.random_range(0..n) as u32,
+                        rng.random_range(0..30),
+                        rng.random_range(0..30),
+                    )
+                })
+                .collect();
+            let mut net = Network::new(n, std::slice::from_ref(&edges));
+            for round in 0..4 {
+                let terminals: Vec<i64> = (0..n)
+                    .map(|_| {
+                        if rng.random_bool(0.6) {
+                            rng.random_range(-60..60)
+                        } else {
+                            0
+                        }
+                    })
+                    .collect();
+                let mut g = Graph::new(n);
+                for (i, &d) in terminals.iter().enumerate() {
+                    g.add_terminal(i, d.max(0) as i32, (-d).max(0) as i32);
+                }
+                for &(i, j, c, r) in &edges {
+                    g.add_edge(i as usize, j as usize, c, r);
+                }
+                let cold = g.max_flow();
+                let warm = net.solve(&terminals);
+                assert_eq!(warm.flow, cold.flow, "trial {trial} round {round}: flow");
+                assert_eq!(
+                    warm.source_side, cold.source_side,
+                    "trial {trial} round {round}: cut"
+                );
+            }
         }
     }
 

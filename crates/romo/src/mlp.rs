@@ -775,7 +775,7 @@ pub fn train(
 ///
 /// Then, when `o.raised_moving_weight` is above `o.moving_weight` and
 /// there are U samples, start 0 is trained once more at the raised weight
-/// and replaces the kept start when its [`error_rate`] under
+/// (beside the starts: the run does not depend on them) and replaces the kept start when its [`error_rate`] under
 /// `o.moving_weight` is lower by at least `o.trial_significance` standard
 /// errors; the report's `weight_trial` records both
 /// and `moving_weight` the weight of the network returned.
@@ -804,14 +804,33 @@ pub fn train_restarts(
             _ => last(a) < last(b),
         }
     };
-    // The best of `best` and the starts `range`, trained in order.
+    // The best of `best` and the starts `range`, compared in order (the
+    // starts are independent, so they are trained in parallel).
     let pick = |best, range: std::ops::Range<usize>| {
-        range.map(|j| start(j as u64)).fold(
+        let runs: Vec<(Mlp, TrainReport)> =
+            range.into_par_iter().map(|j| start(j as u64)).collect();
+        runs.into_iter().fold(
             best,
             |b: (Mlp, TrainReport), c| if better(&c.1, &b.1) { c } else { b },
         )
     };
-    let best = pick(start(0), 1..o.restarts);
+    let raise = o.raised_moving_weight > o.moving_weight && labels.contains(&Label::Moving);
+    // The raised-weight run does not depend on the starts: it trains
+    // beside them.
+    let (best, raised_run) = rayon::join(
+        || pick(start(0), 1..o.restarts),
+        || {
+            raise.then(|| {
+                let raised = MlpOptions {
+                    moving_weight: o.raised_moving_weight,
+                    ..o.clone()
+                };
+                let mut m = Mlp::new(c_in, init_seed);
+                let r = train(&mut m, x, labels, epochs, true, &raised, train_seed);
+                (m, r)
+            })
+        },
+    );
     let (mut best, tried) = if fits(&best.1) {
         (best, o.restarts)
     } else {
@@ -819,13 +838,7 @@ pub fn train_restarts(
         (pick(best, o.restarts..most), most)
     };
     best.1.starts = tried;
-    if o.raised_moving_weight > o.moving_weight && best.1.samples_moving > 0 {
-        let raised = MlpOptions {
-            moving_weight: o.raised_moving_weight,
-            ..o.clone()
-        };
-        let mut m = Mlp::new(c_in, init_seed);
-        let r = train(&mut m, x, labels, epochs, true, &raised, train_seed);
+    if let Some((m, r)) = raised_run {
         let trial = weight_trial(&best.1, &r, o);
         if trial.raised_kept {
             best = (m, r);

@@ -43,7 +43,7 @@
 //! own masks and the cut is solved again (`colour_rounds`).
 
 use crate::flow::Flow;
-use crate::maxflow::Graph;
+use crate::maxflow::{Edge, Network};
 use crate::plane::{Plane, Rgb};
 use crate::regions::colour_segments;
 use rayon::prelude::*;
@@ -518,12 +518,19 @@ pub fn graph_cut(e: &Evidence, o: &ObjectOptions) -> Vec<Vec<bool>> {
     if e.probs.is_empty() {
         return Vec::new();
     }
-    let base = evidence_without_colour(e, o);
-    let bins = if o.colour_weight > 0.0 {
-        colour_bins(e, o.colour_bins)
-    } else {
-        Vec::new()
-    };
+    // The pairwise edges are the same in every cut; only terminals change.
+    // Building them (partly serial) runs beside the unary evidence.
+    let (mut net, (base, bins)) = rayon::join(
+        || pairwise(e, o),
+        || {
+            let bins = if o.colour_weight > 0.0 {
+                colour_bins(e, o.colour_bins)
+            } else {
+                Vec::new()
+            };
+            (evidence_without_colour(e, o), bins)
+        },
+    );
     // The colour term from seeds (`seeds(t, i)`: moving), added to `base`.
     let with_colour = |seeds: &(dyn Fn(usize, usize) -> bool + Sync)| {
         let mut a = base.clone();
@@ -536,15 +543,13 @@ pub fn graph_cut(e: &Evidence, o: &ObjectOptions) -> Vec<Vec<bool>> {
         }
         a
     };
-    // The pairwise edges are the same in every cut; only terminals change.
-    let pairs = pairwise(e, o);
     let mut a = with_colour(&|t, i| e.u[t][i] || (base[t][i] > 0.0 && !e.l[t][i]));
-    let mut masks = solve(&pairs, &a);
+    let mut masks = solve(&mut net, &a);
     // GrabCut's re-estimation: the colour models learnt from the cut.
     if o.colour_weight > 0.0 {
         for _ in 0..o.colour_rounds {
             a = with_colour(&|t, i| masks[t][i]);
-            masks = solve(&pairs, &a);
+            masks = solve(&mut net, &a);
         }
     }
     if o.propagation_frames == 0 || o.propagation_weight <= 0.0 {
@@ -557,7 +562,7 @@ pub fn graph_cut(e: &Evidence, o: &ObjectOptions) -> Vec<Vec<bool>> {
             o.propagation_weight,
             &propagation_prior(&masks, e, o),
         );
-        masks = solve(&pairs, &with);
+        masks = solve(&mut net, &with);
     }
     masks
 }
@@ -651,22 +656,20 @@ fn evidence_without_colour(e: &Evidence, o: &ObjectOptions) -> Vec<Vec<f32>> {
     a
 }
 
-/// The minimum cut of the space–time graph `pairs` ([`pairwise`]) with
-/// unary evidence `a`.
-fn solve(pairs: &Graph, a: &[Vec<f32>]) -> Vec<Vec<bool>> {
+/// The minimum cut of the space–time graph `net` ([`pairwise`]) with
+/// unary evidence `a` (the network keeps the flow for the next cut).
+fn solve(net: &mut Network, a: &[Vec<f32>]) -> Vec<Vec<bool>> {
     let np = a.first().map_or(1, Vec::len).max(1);
-    let mut g = pairs.clone();
-    for (t, at) in a.iter().enumerate() {
-        for (i, ai) in at.iter().enumerate() {
-            let c = (ai.abs() * SCALE).round() as i32;
-            if *ai > 0.0 {
-                g.add_terminal(t * np + i, c, 0);
-            } else {
-                g.add_terminal(t * np + i, 0, c);
-            }
-        }
-    }
-    let cut = g.max_flow();
+    let terminals: Vec<i64> = a
+        .par_iter()
+        .flat_map_iter(|at| {
+            at.iter().map(|ai| {
+                let c = i64::from((ai.abs() * SCALE).round() as i32);
+                if *ai > 0.0 { c } else { -c }
+            })
+        })
+        .collect();
+    let cut = net.solve(&terminals);
     cut.source_side.chunks(np).map(|c| c.to_vec()).collect()
 }
 
@@ -687,15 +690,15 @@ fn contrast_beta(sum: f64, count: usize) -> f32 {
     1.0 / (2.0 * (sum / count.max(1) as f64).max(1e-8)) as f32
 }
 
-/// The space–time graph's pairwise edges (module doc), without terminals.
-fn pairwise(e: &Evidence, o: &ObjectOptions) -> Graph {
+/// The space–time graph's pairwise edges (module doc), without terminals:
+/// the edges of each frame and of each pair are made in parallel.
+fn pairwise(e: &Evidence, o: &ObjectOptions) -> Network {
     let n = e.probs.len();
     let (w, h) = (e.probs[0].w, e.probs[0].h);
     let np = w * h;
-    let mut g = Graph::new(n * np);
-    g.reserve_edges(n * np * 3);
+    let mut parts: Vec<Vec<Edge>> = Vec::new();
     if o.smoothness > 0.0 {
-        for (t, rgb) in e.rgb.iter().enumerate().take(n) {
+        parts.par_extend(e.rgb.par_iter().take(n).enumerate().map(|(t, rgb)| {
             let d2 = |i: usize, j: usize| colour_d2(rgb, i, rgb, j);
             let mut sum = 0f64;
             let mut cnt = 0usize;
@@ -716,24 +719,27 @@ fn pairwise(e: &Evidence, o: &ObjectOptions) -> Graph {
             let cap = |i: usize, j: usize| -> i32 {
                 (o.smoothness * SCALE * (-beta * d2(i, j)).exp()).round() as i32
             };
-            let base = t * np;
+            let node = |i: usize| (t * np + i) as u32;
+            let mut edges = Vec::with_capacity(2 * np);
             for y in 0..h {
                 for x in 0..w {
                     let i = y * w + x;
                     if x + 1 < w {
                         let c = cap(i, i + 1);
-                        g.add_edge(base + i, base + i + 1, c, c);
+                        edges.push((node(i), node(i + 1), c, c));
                     }
                     if y + 1 < h {
                         let c = cap(i, i + w);
-                        g.add_edge(base + i, base + i + w, c, c);
+                        edges.push((node(i), node(i + w), c, c));
                     }
                 }
             }
-        }
+            edges
+        }));
     }
     if o.temporal > 0.0 {
-        for p in 0..e.fwd.len().min(n - 1).min(e.rgb.len().saturating_sub(1)) {
+        let pairs = e.fwd.len().min(n - 1).min(e.rgb.len().saturating_sub(1));
+        parts.par_extend((0..pairs).into_par_iter().map(|p| {
             let (a, b) = (&e.rgb[p], &e.rgb[p + 1]);
             // Where pixel i's flow lands (nearest pixel), if in the frame.
             let land = |f: &Flow, i: usize| {
@@ -770,13 +776,16 @@ fn pairwise(e: &Evidence, o: &ObjectOptions) -> Graph {
             } else {
                 0.0
             };
-            for (i, j, d2) in links {
-                let c = (o.temporal * SCALE * (-beta * d2).exp()).round() as i32;
-                g.add_edge(p * np + i, (p + 1) * np + j, c, c);
-            }
-        }
+            links
+                .into_iter()
+                .map(|(i, j, d2)| {
+                    let c = (o.temporal * SCALE * (-beta * d2).exp()).round() as i32;
+                    ((p * np + i) as u32, ((p + 1) * np + j) as u32, c, c)
+                })
+                .collect()
+        }));
     }
-    g
+    Network::new(n * np, &parts)
 }
 
 #[cfg(test)]
