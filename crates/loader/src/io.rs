@@ -203,6 +203,12 @@ fn open_error(path: &Path, e: std::io::Error) -> LoaderError {
     }
 }
 
+/// Read an image in its own pixel format (8- or 16-bit, grey or colour),
+/// refusing truncated JPEGs ([`jpeg_truncation`]).
+pub fn read_image(path: impl AsRef<Path>) -> Result<image::DynamicImage> {
+    open_image(path.as_ref())
+}
+
 fn open_image(path: &Path) -> Result<image::DynamicImage> {
     if !path.exists() {
         return Err(LoaderError::Missing {

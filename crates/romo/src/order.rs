@@ -57,12 +57,13 @@ pub fn thumbnail(frame: &Rgb) -> Vec<f32> {
     let g = frame.gray();
     let mut t = vec![0f32; THUMB_W * THUMB_H];
     let mut n = vec![0f32; THUMB_W * THUMB_H];
+    // Each column's thumbnail column, once (not a division per pixel).
+    let tx: Vec<usize> = (0..g.w).map(|x| x * THUMB_W / g.w.max(1)).collect();
     for y in 0..g.h {
-        let ty = y * THUMB_H / g.h.max(1);
-        for x in 0..g.w {
-            let k = ty * THUMB_W + x * THUMB_W / g.w.max(1);
-            t[k] += g.data[y * g.w + x];
-            n[k] += 1.0;
+        let row = y * THUMB_H / g.h.max(1) * THUMB_W;
+        for (v, &c) in g.data[y * g.w..(y + 1) * g.w].iter().zip(&tx) {
+            t[row + c] += v;
+            n[row + c] += 1.0;
         }
     }
     for (v, c) in t.iter_mut().zip(&n) {

@@ -389,6 +389,28 @@ impl Rgb {
         Self::from_interleaved(img.width() as usize, img.height() as usize, img.as_raw())
     }
 
+    /// From a decoded image of any pixel format: 8-bit RGB (JPEG frames)
+    /// straight into the planes, the same values as through
+    /// `DynamicImage::to_rgb32f` (`v / 255`) without its interleaved f32
+    /// copy; other formats through that conversion.
+    pub fn from_dynamic(img: image::DynamicImage) -> Self {
+        match img {
+            image::DynamicImage::ImageRgb8(rgb) => {
+                let (w, h) = (rgb.width() as usize, rgb.height() as usize);
+                let data = rgb.as_raw();
+                let ch = |k: usize| {
+                    Plane::from_fn(w, h, |x, y| {
+                        f32::from(data[(y * w + x) * 3 + k]) / f32::from(u8::MAX)
+                    })
+                };
+                Rgb {
+                    c: [ch(0), ch(1), ch(2)],
+                }
+            }
+            other => Self::from_image(&other.to_rgb32f()),
+        }
+    }
+
     /// Width.
     pub fn w(&self) -> usize {
         self.c[0].w
@@ -422,6 +444,35 @@ impl Rgb {
 #[cfg(test)]
 mod tests {
     use super::*;
+
+    /// An 8-bit RGB image's planes hold the bits `to_rgb32f` gives, for
+    /// every value in every channel; a 16-bit image keeps its precision.
+    #[test]
+    fn eight_bit_frames_convert_as_the_image_crate_does() {
+        let img = image::RgbImage::from_fn(256, 3, |x, y| {
+            let v = x as u8;
+            match y {
+                0 => image::Rgb([v, 255 - v, v / 2]),
+                1 => image::Rgb([v / 3, v, 255 - v]),
+                _ => image::Rgb([255 - v, v / 5, v]),
+            }
+        });
+        let dynamic = image::DynamicImage::ImageRgb8(img);
+        let want = Rgb::from_image(&dynamic.to_rgb32f());
+        let got = Rgb::from_dynamic(dynamic);
+        for k in 0..3 {
+            let bits = |p: &Plane| p.data.iter().map(|v| v.to_bits()).collect::<Vec<_>>();
+            assert_eq!(bits(&got.c[k]), bits(&want.c[k]), "channel {k}");
+        }
+        let deep = image::DynamicImage::ImageRgb16(image::ImageBuffer::from_pixel(
+            2,
+            2,
+            image::Rgb([1u16, 32768, 65535]),
+        ));
+        let planes = Rgb::from_dynamic(deep);
+        assert_eq!(planes.c[0].data[0], 1.0 / 65535.0);
+        assert_eq!(planes.c[2].data[3], 1.0);
+    }
 
     /// The tabulated resize gives the same bits as sampling every output
     /// pixel with [`Plane::bilinear`], growing, shrinking and across the

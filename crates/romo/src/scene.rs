@@ -33,7 +33,7 @@ impl FrameSource for PathSource {
             .paths
             .get(i)
             .ok_or_else(|| RomoError::Input(format!("frame {i} out of range")))?;
-        Ok(Rgb::from_image(&loader::io::read_rgb32f(p)?))
+        Ok(Rgb::from_dynamic(loader::io::read_image(p)?))
     }
     fn size(&self, i: usize) -> Result<(usize, usize)> {
         let p = self
