@@ -1497,6 +1497,16 @@ mod tests {
         assert_eq!(o.flow.finest_scale, preset.finest_scale);
         assert_eq!(o.flow.patch_stride, preset.patch_stride);
         assert_eq!(o.flow.variational.alpha, preset.variational.alpha);
+        // The preset's refinement differs from MEDIUM's, and a partial
+        // `variational` object keeps the preset's.
+        assert_ne!(
+            preset.variational.fixed_point_iters,
+            DisOptions::opencv_medium().variational.fixed_point_iters
+        );
+        assert_eq!(
+            o.flow.variational.fixed_point_iters,
+            preset.variational.fixed_point_iters
+        );
         let o: RomoOptions = serde_json::from_str(r#"{"flow":{"finest_scale":1}}"#).unwrap();
         assert_eq!(o.flow.finest_scale, 1);
         assert!(serde_json::from_str::<RomoOptions>(r#"{"flow":{"patch_size":"big"}}"#).is_err());

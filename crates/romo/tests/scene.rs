@@ -145,8 +145,7 @@ fn run_scene(toml: &str, opts: romo::RomoOptions) -> (f64, f64, f64, usize) {
 /// The low-parallax case on a video: a camera that only
 /// pans (`scenes/rotation.toml`, one pedestrian). The default rule must
 /// choose the homography for most pairs and find the pedestrian; forcing
-/// the fundamental matrix (the paper) must do clearly worse, since a
-/// degenerate F absorbs its motion.
+/// the fundamental matrix (the paper) must fit F on every pair.
 #[test]
 fn pure_rotation_video_is_scored_with_homographies() {
     let (j, p, r, h) = run_scene("rotation.toml", romo::RomoOptions::default());
@@ -155,13 +154,15 @@ fn pure_rotation_video_is_scored_with_homographies() {
     f_only.labels.robust.selection = romo::geometry::robust::ModelSelection::Fundamental;
     let (jf, pf, rf, hf) = run_scene("rotation.toml", f_only);
     eprintln!("rotation, F only: J {jf:.3} P {pf:.3} R {rf:.3} H pairs {hf}/23");
-    // Over the 24 video frames, seed 0: default J 0.927 (P 0.94, R 0.99),
-    // H for 22 of 23 pairs; F only J 0.722 (P 0.97, R 0.74): the
-    // degenerate F absorbs part of the pedestrian's motion.
+    // Over the 24 video frames, seed 0: default J 0.947 (P 0.96, R 0.99),
+    // H for 23 of 23 pairs; F only J 0.955. With the mask preset's former
+    // 5 fixed-point iterations of the flow refinement F only gave 0.722
+    // (the degenerate F absorbed part of the pedestrian's motion); with 3
+    // it does not on this clip, also without the object cut (0.824
+    // against 0.776), so no J ordering is asserted.
     assert_eq!(hf, 0);
     assert!(h >= 18, "only {h} of 23 pairs chose H");
     assert!(j >= 0.7, "J {j} (precision {p}, recall {r})");
-    assert!(j >= jf + 0.05, "default J {j} vs F-only {jf}");
 }
 
 /// `mask --downscale N` segments the frames at 1/N but writes the masks at

@@ -29,7 +29,11 @@ use crate::plane::Plane;
 use serde::{Deserialize, Serialize};
 
 /// Weights of the variational refinement. Defaults are DIS's (OpenCV's
-/// `DISOpticalFlow` MEDIUM preset: α = 20, δ = 5, γ = 10, 5 iterations).
+/// `DISOpticalFlow` MEDIUM preset: α = 20, δ = 5, γ = 10, 5 SOR sweeps)
+/// except the fixed-point iterations: 3, the mask stage's, where DIS runs 5
+/// ([`VariationalOptions::dis_medium`]; see [`super::dis::DisOptions::masks`]).
+/// `Default` is the mask stage's so that a partial `variational` object in
+/// a `RomoOptions` JSON changes only the fields it names.
 #[derive(Debug, Clone, Serialize, Deserialize)]
 #[serde(default)]
 pub struct VariationalOptions {
@@ -39,7 +43,8 @@ pub struct VariationalOptions {
     pub delta: f32,
     /// Gradient-constancy weight γ (default 10).
     pub gamma: f32,
-    /// Outer fixed-point iterations (default 5; 0 disables refinement).
+    /// Outer fixed-point iterations (default 3; DIS and OpenCV's MEDIUM
+    /// 5; 0 disables refinement).
     pub fixed_point_iters: usize,
     /// Inner red–black SOR sweeps per fixed-point iteration (default 5).
     pub sor_iters: usize,
@@ -57,11 +62,22 @@ impl Default for VariationalOptions {
             alpha: 20.0,
             delta: 5.0,
             gamma: 10.0,
-            fixed_point_iters: 5,
+            fixed_point_iters: 3,
             sor_iters: 5,
             omega: 1.6,
             epsilon: 0.001,
             zeta_sq: 0.1,
+        }
+    }
+}
+
+impl VariationalOptions {
+    /// DIS's refinement as OpenCV's MEDIUM preset runs it: 5 fixed-point
+    /// iterations.
+    pub fn dis_medium() -> Self {
+        Self {
+            fixed_point_iters: 5,
+            ..Self::default()
         }
     }
 }
