@@ -189,7 +189,8 @@ impl Network {
     /// The minimum cut with `terminals[i]` = node i's source capacity
     /// minus its sink capacity (one value per node). `Cut::flow` is the
     /// cut's capacity without the part both terminal edges of a node
-    /// share (`min(source, sink)`, which every cut pays).
+    /// share (`min(source, sink)`, which every cut pays). Panics when
+    /// `terminals` does not hold one value per node.
     pub fn solve(&mut self, terminals: &[i64]) -> Cut {
         assert_eq!(terminals.len(), self.len(), "one terminal value per node");
         let s = &mut self.s;

@@ -775,10 +775,11 @@ pub fn train(
 ///
 /// Then, when `o.raised_moving_weight` is above `o.moving_weight` and
 /// there are U samples, start 0 is trained once more at the raised weight
-/// (beside the starts: the run does not depend on them) and replaces the kept start when its [`error_rate`] under
-/// `o.moving_weight` is lower by at least `o.trial_significance` standard
-/// errors; the report's `weight_trial` records both
-/// and `moving_weight` the weight of the network returned.
+/// (beside the starts: the run does not depend on them) and replaces the
+/// kept start when its [`error_rate`] under `o.moving_weight` is lower by
+/// at least `o.trial_significance` standard errors; the report's
+/// `weight_trial` records both and `moving_weight` the weight of the
+/// network returned.
 pub fn train_restarts(
     c_in: usize,
     x: &[f32],
