@@ -669,8 +669,10 @@ fn solve(net: &mut Network, a: &[Vec<f32>]) -> Vec<Vec<bool>> {
             })
         })
         .collect();
-    let cut = net.solve(&terminals);
-    cut.source_side.chunks(np).map(|c| c.to_vec()).collect()
+    net.solve(&terminals)
+        .chunks(np)
+        .map(|c| c.to_vec())
+        .collect()
 }
 
 /// Squared RGB distance between pixel `i` of `a` and pixel `j` of `b`.
