@@ -378,7 +378,13 @@ pub struct Rgb {
 impl Rgb {
     /// From interleaved RGB f32 data.
     pub fn from_interleaved(w: usize, h: usize, data: &[f32]) -> Self {
-        let ch = |k: usize| Plane::from_fn(w, h, |x, y| data[(y * w + x) * 3 + k]);
+        Self::from_samples(w, h, |i| data[i])
+    }
+
+    /// The planes of interleaved RGB samples, `sample(i)` the value at
+    /// index `i = (y·w + x)·3 + channel`.
+    fn from_samples(w: usize, h: usize, sample: impl Fn(usize) -> f32 + Sync) -> Self {
+        let ch = |k: usize| Plane::from_fn(w, h, |x, y| sample((y * w + x) * 3 + k));
         Rgb {
             c: [ch(0), ch(1), ch(2)],
         }
@@ -398,14 +404,7 @@ impl Rgb {
             image::DynamicImage::ImageRgb8(rgb) => {
                 let (w, h) = (rgb.width() as usize, rgb.height() as usize);
                 let data = rgb.as_raw();
-                let ch = |k: usize| {
-                    Plane::from_fn(w, h, |x, y| {
-                        f32::from(data[(y * w + x) * 3 + k]) / f32::from(u8::MAX)
-                    })
-                };
-                Rgb {
-                    c: [ch(0), ch(1), ch(2)],
-                }
+                Self::from_samples(w, h, |i| f32::from(data[i]) / f32::from(u8::MAX))
             }
             other => Self::from_image(&other.to_rgb32f()),
         }
